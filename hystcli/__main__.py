@@ -1,0 +1,4 @@
+"""``python -m hystcli`` runs the ``hyst`` command line."""
+from .cli import main
+
+main()

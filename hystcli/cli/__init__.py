@@ -1,0 +1,24 @@
+"""Command-line layer of hyst: parse, call one core function, render.
+
+``app.py`` holds the typer app, the shared options and the error rendering; each ``*_cmds.py``
+module registers the commands of one area of the core (model, twin, shift, metrics, device,
+diagnosis). They are imported here, in name order, so that a new command module needs no edit
+elsewhere.
+"""
+from __future__ import annotations
+
+import importlib
+import pkgutil
+
+from .app import app
+
+for _mod in sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name.endswith("_cmds")):
+    importlib.import_module(f"{__name__}.{_mod}")
+
+
+def main() -> None:
+    """Entry point of the ``hyst`` console script."""
+    app(prog_name="hyst")
+
+
+__all__ = ["app", "main"]

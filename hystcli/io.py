@@ -1,0 +1,477 @@
+"""Run CSV files and model JSON files: read, validate at the boundary, write atomically.
+
+Formats are DESIGN.md section 6. A run CSV is optional ``# key: value`` metadata lines, a header
+row and numeric rows; a model JSON is ``{"format": "hyst-model", "version": 1, "knobs": ...}``.
+Every reader raises :class:`~hystcli.errors.DataError` or :class:`~hystcli.errors.ModelError`
+with a message that names the file and the problem; every writer writes a temporary file beside
+the target and renames it, so a reader never sees a partial file.
+"""
+from __future__ import annotations
+
+import contextlib
+import datetime as _dt
+import hashlib
+import io as _io
+import json
+import math
+import os
+import tempfile
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from types import MappingProxyType
+from typing import Callable, Iterable, Mapping
+
+import numpy as np
+import pandas as pd
+
+from .errors import DataError, HystError, ModelError
+from .model import (PARAM_NAMES, EffectSpec, Geometry, KnobIdentification, KnobModel, Model)
+
+MODEL_FORMAT = "hyst-model"
+MODEL_VERSION = 1
+
+KNOWN_COLUMNS = ("t", "q1", "q2", "y1", "y2", "c1", "c2", "r1", "r2")
+KNOWN_META = ("catheter", "controller", "shape", "motion", "trial", "rotation", "offset1", "offset2")
+
+
+# --------------------------------------------------------------------------------------------
+# runs
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Run:
+    """One recorded or simulated run: named numeric columns of equal length plus metadata.
+
+    Attributes
+    ----------
+    columns : mapping of str to numpy.ndarray
+        ``t`` (s), ``q1``/``q2`` (deg), ``y1``/``y2`` (deg), ``c1``/``c2`` (mA),
+        ``r1``/``r2`` (deg), and any other numeric column, in file order.
+    meta : mapping of str to str
+        The ``# key: value`` lines, in file order.
+    source : str or None
+        Where the run was read from, for messages.
+    """
+
+    columns: Mapping[str, np.ndarray]
+    meta: Mapping[str, str] = field(default_factory=dict)
+    source: str | None = None
+
+    def __post_init__(self) -> None:
+        cols = {}
+        n = None
+        for name, values in self.columns.items():
+            arr = np.asarray(values, dtype=np.float64)
+            if arr.ndim != 1:
+                raise DataError(f"{self._where()}column {name} must be 1-D")
+            if n is None:
+                n = arr.shape[0]
+            elif arr.shape[0] != n:
+                raise DataError(f"{self._where()}column {name} has {arr.shape[0]} rows, expected {n}")
+            arr.setflags(write=False)
+            cols[str(name)] = arr
+        object.__setattr__(self, "columns", MappingProxyType(cols))
+        object.__setattr__(self, "meta", MappingProxyType({str(k): str(v) for k, v in self.meta.items()}))
+
+    def _where(self) -> str:
+        return f"{self.source}: " if self.source else ""
+
+    def __len__(self) -> int:
+        return next(iter(self.columns.values())).shape[0] if self.columns else 0
+
+    def __contains__(self, name: str) -> bool:
+        return name in self.columns
+
+    def __getitem__(self, name: str) -> np.ndarray:
+        try:
+            return self.columns[name]
+        except KeyError:
+            raise DataError(f"{self._where()}missing column {name!r} "
+                            f"(columns: {', '.join(self.columns) or 'none'})") from None
+
+    @property
+    def t(self) -> np.ndarray:
+        """Time column (s)."""
+        return self["t"]
+
+    def knobs(self, prefix: str = "q") -> list[int]:
+        """Knob indices that have a column ``{prefix}{k}`` (e.g. ``q1``, ``q2``)."""
+        return [k for k in (1, 2) if f"{prefix}{k}" in self.columns]
+
+    def require(self, *names: str) -> "Run":
+        """Raise :class:`DataError` naming the first missing column; return self."""
+        for name in names:
+            if name not in self.columns:
+                self[name]
+        return self
+
+    def with_columns(self, **columns: np.ndarray) -> "Run":
+        """A copy with columns added or replaced (order kept, new ones appended)."""
+        cols = dict(self.columns)
+        cols.update(columns)
+        return replace(self, columns=cols)
+
+    def with_meta(self, **meta: object) -> "Run":
+        """A copy with metadata added or replaced (``None`` removes a key)."""
+        m = dict(self.meta)
+        for k, v in meta.items():
+            if v is None:
+                m.pop(k, None)
+            else:
+                m[k] = _meta_str(v)
+        return replace(self, meta=m)
+
+    def unknown_meta(self) -> list[str]:
+        """Metadata keys hyst does not interpret (kept and reported, never an error)."""
+        return [k for k in self.meta if k not in KNOWN_META]
+
+    @property
+    def sample_rate(self) -> float:
+        """Median sample rate (Hz) from ``t``."""
+        t = self.t
+        if len(t) < 2:
+            raise DataError(f"{self._where()}needs at least 2 samples to know the sample rate")
+        return float(1.0 / np.median(np.diff(t)))
+
+
+def _meta_str(v: object) -> str:
+    if isinstance(v, float):
+        return repr(v) if not v.is_integer() else f"{v:.1f}"
+    return str(v)
+
+
+def _parse_meta_line(line: str) -> tuple[str, str] | None:
+    body = line[1:].strip()
+    if ":" not in body:
+        return None
+    key, _, value = body.partition(":")
+    key = key.strip()
+    if not key or " " in key:
+        return None
+    return key, value.strip()
+
+
+def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
+    """Read and validate a run CSV.
+
+    Parameters
+    ----------
+    path : path-like
+        The CSV file.
+    require : iterable of str
+        Columns that must be present (``t`` always is).
+
+    Returns
+    -------
+    Run
+
+    Raises
+    ------
+    DataError
+        Missing or empty file, no header, a missing column, a non-numeric cell, NaN or
+        infinity, non-increasing ``t``; the message names the file, column and row.
+    """
+    p = Path(path)
+    name = str(path)
+    if not p.exists():
+        raise DataError(f"{name}: no such file")
+    if p.is_dir():
+        raise DataError(f"{name}: is a directory, not a run CSV")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise DataError(f"{name}: not a text CSV file (not UTF-8)") from None
+    except OSError as exc:
+        raise DataError(f"{name}: cannot read ({exc.strerror})") from None
+    return parse_run(text, source=name, require=require)
+
+
+def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",)) -> Run:
+    """Parse the text of a run CSV (see :func:`read_run`)."""
+    lines = text.splitlines()
+    meta: dict[str, str] = {}
+    i = 0
+    while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
+        if lines[i].startswith("#"):
+            kv = _parse_meta_line(lines[i])
+            if kv is not None:
+                meta[kv[0]] = kv[1]
+        i += 1
+    if i >= len(lines):
+        raise DataError(f"{source}: empty file (no header row)")
+    header = [h.strip() for h in lines[i].split(",")]
+    if any(h == "" for h in header):
+        raise DataError(f"{source}: header row has an empty column name")
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise DataError(f"{source}: column {dup!r} appears twice in the header")
+    body = "\n".join(lines[i + 1:])
+    header_line = i + 1  # 1-based line number of the header
+    if not body.strip():
+        raise DataError(f"{source}: no data rows after the header")
+    try:
+        df = pd.read_csv(_io.StringIO(body), header=None, names=header, dtype=np.float64,
+                         skip_blank_lines=True, comment=None, engine="c")
+        fast_ok = True
+    except (ValueError, pd.errors.ParserError):
+        fast_ok = False
+    if not fast_ok:
+        try:
+            df = pd.read_csv(_io.StringIO(body), header=None, names=header, dtype=str,
+                             keep_default_na=False, skip_blank_lines=True, engine="python")
+        except pd.errors.ParserError as exc:
+            raise DataError(f"{source}: malformed CSV ({str(exc).splitlines()[0]})") from None
+        for col in header:
+            conv = pd.to_numeric(df[col].str.strip(), errors="coerce")
+            bad = np.flatnonzero(conv.isna().to_numpy() & ~df[col].str.strip().str.lower().isin(["nan"]).to_numpy())
+            if bad.size:
+                row = int(bad[0])
+                raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: "
+                                f"{df[col].iloc[row]!r} is not a number")
+        df = df.apply(lambda s: pd.to_numeric(s.str.strip(), errors="coerce"))
+    cols: dict[str, np.ndarray] = {}
+    for col in header:
+        arr = df[col].to_numpy(dtype=np.float64)
+        finite = np.isfinite(arr)
+        if not finite.all():
+            row = int(np.flatnonzero(~finite)[0])
+            what = "NaN (missing value)" if np.isnan(arr[row]) else "an infinite value"
+            raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: {what}")
+        cols[col] = arr
+    run = Run(cols, meta, source)
+    run.require("t", *require)
+    t = cols["t"]
+    dt = np.diff(t)
+    if dt.size and not np.all(dt > 0):
+        row = int(np.flatnonzero(~(dt > 0))[0]) + 1
+        raise DataError(f"{source}: column 't' is not strictly increasing at line {header_line + 1 + row} "
+                        f"({t[row - 1]!r} then {t[row]!r})")
+    return run
+
+
+def format_run(run: Run) -> str:
+    """Text of a run CSV: metadata lines, header, rows (floats in shortest round-trip form)."""
+    buf = _io.StringIO()
+    for k, v in run.meta.items():
+        v = str(v).replace("\n", " ")
+        buf.write(f"# {k}: {v}\n")
+    df = pd.DataFrame({k: np.asarray(v) for k, v in run.columns.items()})
+    # float_format=None writes repr(), the shortest string that reads back to the same double
+    df.to_csv(buf, index=False, lineterminator="\n")
+    return buf.getvalue()
+
+
+def write_run(path: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Write a run CSV atomically (temporary file + rename).
+
+    Parameters
+    ----------
+    path : path-like
+        Target file.
+    run : Run
+    inputs : iterable of path-like
+        Input files of the command: writing over one of them is refused.
+    """
+    text = format_run(run)
+    atomic_write_text(path, text, inputs=inputs)
+
+
+# --------------------------------------------------------------------------------------------
+# atomic writes
+# --------------------------------------------------------------------------------------------
+def check_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> None:
+    """Refuse to write ``path`` when it is one of the command's input files."""
+    target = Path(path).resolve()
+    for inp in inputs:
+        if inp is None:
+            continue
+        if Path(inp).resolve() == target:
+            raise DataError(f"{path}: refusing to overwrite an input file; choose another output path")
+
+
+def atomic_write_text(path: str | os.PathLike, text: str,
+                      inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Write ``text`` to ``path`` through a temporary file in the same folder and a rename."""
+    atomic_write(path, lambda f: f.write(text.encode("utf-8")), inputs=inputs)
+
+
+def atomic_write(path: str | os.PathLike, writer: Callable, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Call ``writer(binary_file)`` on a temporary file, then rename it onto ``path``.
+
+    On any error the temporary file is removed and ``path`` is left as it was.
+    """
+    check_not_input(path, inputs)
+    target = Path(path)
+    folder = target.parent if str(target.parent) else Path(".")
+    if not folder.is_dir():
+        raise DataError(f"{path}: the folder {folder} does not exist")
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    try:
+        with os.fdopen(fd, "wb") as f:
+            writer(f)
+            f.flush()
+            os.fsync(f.fileno())
+        os.replace(tmp, target)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+# --------------------------------------------------------------------------------------------
+# models
+# --------------------------------------------------------------------------------------------
+def _num(value: object, what: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        raise ModelError(f"{what} must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise ModelError(f"{what} must be finite, got {value!r}")
+    return v
+
+
+def model_from_dict(data: object, source: str = "<model>") -> Model:
+    """Build a :class:`Model` from the parsed JSON of a model file, validating everything."""
+    if not isinstance(data, dict):
+        raise ModelError(f"{source}: not a hyst model (the top level must be a JSON object)")
+    if data.get("format") != MODEL_FORMAT:
+        raise ModelError(f"{source}: not a hyst model (\"format\" must be {MODEL_FORMAT!r}, "
+                         f"got {data.get('format')!r})")
+    version = data.get("version")
+    if version != MODEL_VERSION:
+        raise ModelError(f"{source}: unknown model version {version!r} (this hyst reads version {MODEL_VERSION})")
+    knobs_raw = data.get("knobs")
+    if not isinstance(knobs_raw, dict) or not knobs_raw:
+        raise ModelError(f"{source}: \"knobs\" must be an object with knob \"1\" and/or \"2\"")
+    knobs: dict[int, KnobModel] = {}
+    for key, params in knobs_raw.items():
+        if key not in ("1", "2"):
+            raise ModelError(f"{source}: unknown knob {key!r} (knobs are \"1\" and \"2\")")
+        if not isinstance(params, dict):
+            raise ModelError(f"{source}: knob {key} must be an object of parameters")
+        missing = [p for p in PARAM_NAMES if p != "offset" and p not in params]
+        if missing:
+            raise ModelError(f"{source}: knob {key} is missing parameter {missing[0]}")
+        unknown = [p for p in params if p not in PARAM_NAMES]
+        if unknown:
+            raise ModelError(f"{source}: knob {key} has unknown parameter {unknown[0]!r}")
+        values = {p: _num(params[p], f"knob {key} parameter {p}") for p in params}
+        try:
+            knobs[int(key)] = KnobModel(**values)
+        except ModelError as exc:
+            raise ModelError(f"{source}: knob {key}: {exc}") from None
+    geometry = None
+    if data.get("geometry") is not None:
+        g = data["geometry"]
+        if not isinstance(g, dict) or "beta_catheter_mm" not in g or "beta_knob_mm" not in g:
+            raise ModelError(f"{source}: \"geometry\" needs beta_catheter_mm and beta_knob_mm")
+        try:
+            geometry = Geometry(_num(g["beta_catheter_mm"], "geometry beta_catheter_mm"),
+                                _num(g["beta_knob_mm"], "geometry beta_knob_mm"))
+        except ModelError as exc:
+            raise ModelError(f"{source}: {exc}") from None
+    effects = []
+    for i, e in enumerate(data.get("effects") or []):
+        if not isinstance(e, dict) or not isinstance(e.get("name"), str):
+            raise ModelError(f"{source}: effect #{i + 1} needs a \"name\"")
+        params = e.get("params") or {}
+        if not isinstance(params, dict):
+            raise ModelError(f"{source}: effect {e['name']!r}: \"params\" must be an object")
+        effects.append(EffectSpec(e["name"], {k: _num(v, f"effect {e['name']} parameter {k}")
+                                              for k, v in params.items()}))
+    meta = data.get("meta") or {}
+    if not isinstance(meta, dict):
+        raise ModelError(f"{source}: \"meta\" must be an object")
+    ident: dict[int, KnobIdentification] = {}
+    for key, d in (data.get("identification") or {}).items():
+        if key not in ("1", "2") or not isinstance(d, dict):
+            raise ModelError(f"{source}: bad \"identification\" entry {key!r}")
+        try:
+            ident[int(key)] = KnobIdentification(
+                slope_dead_zone=_num(d["slope_dead_zone"], "identification slope_dead_zone"),
+                slope_loaded=_num(d["slope_loaded"], "identification slope_loaded"),
+                q_min=_num(d["q_min"], "identification q_min"),
+                q_max=_num(d["q_max"], "identification q_max"),
+                rmse=None if d.get("rmse") is None else _num(d["rmse"], "identification rmse"),
+                stderr={k: _num(v, f"identification stderr {k}") for k, v in (d.get("stderr") or {}).items()},
+            )
+        except KeyError as exc:
+            raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
+    return Model(knobs, geometry, tuple(effects), meta, ident)
+
+
+def model_to_dict(model: Model) -> dict:
+    """The JSON-ready dict of a model (DESIGN.md section 6)."""
+    out: dict = {"format": MODEL_FORMAT, "version": MODEL_VERSION,
+                 "knobs": {str(k): v.params() for k, v in model.knobs.items()}}
+    if model.geometry is not None:
+        out["geometry"] = {"beta_catheter_mm": model.geometry.beta_catheter_mm,
+                           "beta_knob_mm": model.geometry.beta_knob_mm}
+    if model.effects:
+        out["effects"] = [{"name": e.name, "params": dict(e.params)} for e in model.effects]
+    if model.meta:
+        out["meta"] = dict(model.meta)
+    if model.identification:
+        out["identification"] = {
+            str(k): {"slope_dead_zone": v.slope_dead_zone, "slope_loaded": v.slope_loaded,
+                     "q_min": v.q_min, "q_max": v.q_max, "rmse": v.rmse, "stderr": dict(v.stderr)}
+            for k, v in model.identification.items()}
+    return out
+
+
+def load_model(path: str | os.PathLike) -> Model:
+    """Read and validate a model JSON file.
+
+    Raises
+    ------
+    ModelError
+        Missing file, invalid JSON, wrong format or version, invalid parameters.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise ModelError(f"{path}: no such model file")
+    try:
+        text = p.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ModelError(f"{path}: cannot read the model ({exc})") from None
+    if not text.strip():
+        raise ModelError(f"{path}: empty model file")
+    try:
+        data = json.loads(text, parse_constant=lambda c: float(c))
+    except json.JSONDecodeError as exc:
+        raise ModelError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    return model_from_dict(data, source=str(path))
+
+
+def dumps_model(model: Model) -> str:
+    """JSON text of a model (stable key order, so the same model gives the same bytes)."""
+    return json.dumps(model_to_dict(model), indent=2, allow_nan=False) + "\n"
+
+
+def save_model(path: str | os.PathLike, model: Model, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Write a model JSON file atomically."""
+    atomic_write_text(path, dumps_model(model), inputs=inputs)
+
+
+def file_sha256(path: str | os.PathLike) -> str:
+    """SHA-256 of a file, for the provenance in model metadata."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def provenance(source: str | os.PathLike | None, **extra: object) -> dict:
+    """Model metadata: the source file, its hash and, for reproducibility, no wall-clock time.
+
+    ``created`` is the source file's modification time, not now, so that the same command on the
+    same input gives the same bytes (house rule 6).
+    """
+    meta: dict = {}
+    if source is not None:
+        meta["source"] = Path(source).name
+        meta["sha256"] = file_sha256(source)
+        mtime = os.stat(source).st_mtime
+        meta["created"] = _dt.datetime.fromtimestamp(mtime, _dt.timezone.utc).replace(microsecond=0).isoformat()
+    meta.update({k: v for k, v in extra.items() if v is not None})
+    return meta

@@ -1,0 +1,572 @@
+"""The dead-zone + backlash hysteresis model of one knob and of a two-knob catheter.
+
+This module owns the equations of the paper's section II (Kim & Mansi) as fixed by DESIGN.md
+section 3: the two envelopes, the forward clamp recursion, its exact inverse (compensation), the
+shift of the model by an ``offset``, the shift a known shaft shape causes (paper eqs. 1-4) and the
+update of both knobs' offsets for a bulk rotation of the catheter body.
+
+Symbols (paper eq. D_hats and eq. model_eqs)::
+
+    D_pos, D_neg   dead-zone edges            -> d_pos, d_neg
+    B_pos, B_neg   backlash widths            -> b_pos, b_neg
+    omega          slope of the loaded lines  -> omega
+    H_pos, H_neg   dead-zone heights          -> h_pos, h_neg
+    Dhat_pos/neg   far edges of the dead zone -> dhat_pos, dhat_neg (derived)
+    q_init         shift of the model         -> offset
+
+The forward and inverse loops are compiled with numba: they are sequential recursions (each output
+depends on the previous one), so vectorised numpy cannot express them, and a plain Python loop
+runs at a few million samples per second.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field, replace
+from types import MappingProxyType
+from typing import Mapping, Sequence
+
+import numpy as np
+from numba import njit
+
+from .errors import ModelError
+
+PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
+"""The parameters of one knob in file order (DESIGN.md section 6)."""
+
+PAPER_OMEGA = 1.45
+"""The paper's average slope omega (section III: "We used omega as 1.45 as the average value")."""
+
+# Tolerance of the validity checks: parameters that come out of a least-squares fit may sit on a
+# constraint to within rounding; anything beyond this is a real violation.
+_TOL = 1e-9
+
+
+# --------------------------------------------------------------------------------------------
+# compiled kernels
+# --------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=False)
+def _f_up(u, dhat_pos, d_pos, omega, h_pos):
+    # branch-free form of the three-piece ascending envelope (L2, L3, L4)
+    return h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
+
+
+@njit(cache=True, fastmath=False)
+def _f_dn(u, d_neg, dhat_neg, omega, h_neg):
+    # branch-free form of the three-piece descending envelope (L8, L7, L6)
+    return h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
+
+
+@njit(cache=True, fastmath=False)
+def _forward_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, out):
+    y = y0
+    for i in range(x.shape[0]):
+        u = x[i] - offset
+        lo = _f_up(u, dhat_pos, d_pos, omega, h_pos)
+        hi = _f_dn(u, d_neg, dhat_neg, omega, h_neg)
+        if y < lo:
+            y = lo
+        if y > hi:
+            y = hi
+        out[i] = y
+    return y
+
+
+@njit(cache=True, fastmath=False)
+def _inverse_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, x0, out):
+    y = y0
+    x = x0
+    for i in range(r.shape[0]):
+        ri = r[i]
+        if ri > y:
+            # smallest u on the ascending envelope reaching ri: past the dead zone when above it
+            if ri > h_pos:
+                x = d_pos + (ri - h_pos) / omega + offset
+            else:
+                x = dhat_pos + (ri - h_pos) / omega + offset
+            y = ri
+        elif ri < y:
+            # largest u on the descending envelope reaching ri
+            if ri < h_neg:
+                x = d_neg + (ri - h_neg) / omega + offset
+            else:
+                x = dhat_neg + (ri - h_neg) / omega + offset
+            y = ri
+        out[i] = x
+    return y
+
+
+# --------------------------------------------------------------------------------------------
+# one knob
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class KnobModel:
+    """Dead-zone + backlash hysteresis of one knob (paper eqs. D_hats and model_eqs).
+
+    Parameters
+    ----------
+    d_pos, d_neg : float
+        Dead-zone edges :math:`D_{pos}`, :math:`D_{neg}` (deg of knob).
+    b_pos, b_neg : float
+        Backlash widths :math:`B_{pos}`, :math:`B_{neg}` (deg of knob), >= 0.
+    omega : float
+        Slope :math:`\\omega` of the loaded lines (deg of tip per deg of knob), > 0.
+    h_pos, h_neg : float
+        Dead-zone heights :math:`H_{pos}`, :math:`H_{neg}` (deg of tip).
+    offset : float
+        Shift :math:`q_{init}` of the whole model along the knob axis (deg), 0 for the straight
+        shaft. The shifted edges are :math:`\\tilde D = D + offset` (Algorithm 1).
+
+    Raises
+    ------
+    ModelError
+        When a parameter is not finite or the parameters violate a validity condition of
+        DESIGN.md section 3 (the message names the condition).
+    """
+
+    d_pos: float
+    d_neg: float
+    b_pos: float
+    b_neg: float
+    omega: float = PAPER_OMEGA
+    h_pos: float = 0.0
+    h_neg: float = 0.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in PARAM_NAMES:
+            value = getattr(self, name)
+            try:
+                value = float(value)
+            except (TypeError, ValueError):
+                raise ModelError(f"parameter {name} must be a number, got {value!r}") from None
+            if not math.isfinite(value):
+                raise ModelError(f"parameter {name} must be finite, got {value}")
+            object.__setattr__(self, name, value)
+        if not self.omega > 0:
+            raise ModelError(f"invalid model: omega > 0 is violated (omega = {self.omega:g})")
+        if self.b_pos < 0:
+            raise ModelError(f"invalid model: b_pos >= 0 is violated (b_pos = {self.b_pos:g})")
+        if self.b_neg < 0:
+            raise ModelError(f"invalid model: b_neg >= 0 is violated (b_neg = {self.b_neg:g})")
+        if self.dhat_pos > self.d_pos + _TOL:
+            raise ModelError(
+                "invalid model: dhat_pos <= d_pos is violated "
+                f"(dhat_pos = {self.dhat_pos:g} > d_pos = {self.d_pos:g})"
+            )
+        if self.d_neg > self.dhat_neg + _TOL:
+            raise ModelError(
+                "invalid model: d_neg <= dhat_neg is violated "
+                f"(d_neg = {self.d_neg:g} > dhat_neg = {self.dhat_neg:g})"
+            )
+        # Both envelopes are piecewise linear with equal outer slopes, so f_up <= f_dn everywhere
+        # exactly when it holds at the four breakpoints.
+        us = np.array([self.dhat_pos, self.d_pos, self.d_neg, self.dhat_neg])
+        gap = self.f_dn(us) - self.f_up(us)
+        if np.min(gap) < -_TOL * max(1.0, float(np.max(np.abs(us)))):
+            worst = us[int(np.argmin(gap))]
+            raise ModelError(
+                "invalid model: f_up <= f_dn everywhere is violated "
+                f"(the ascending envelope passes the descending one by {-np.min(gap):.3g} deg "
+                f"at u = {worst:g})"
+            )
+
+    # -- derived parameters -------------------------------------------------------------------
+    @property
+    def dhat_pos(self) -> float:
+        """:math:`\\hat D_{pos} = (H_{pos}-H_{neg})/\\omega + D_{neg} + B_{neg}` (paper eq. D_hats)."""
+        return (self.h_pos - self.h_neg) / self.omega + self.d_neg + self.b_neg
+
+    @property
+    def dhat_neg(self) -> float:
+        """:math:`\\hat D_{neg} = (H_{neg}-H_{pos})/\\omega + D_{pos} - B_{pos}` (paper eq. D_hats)."""
+        return (self.h_neg - self.h_pos) / self.omega + self.d_pos - self.b_pos
+
+    @property
+    def shifted_d_pos(self) -> float:
+        """:math:`\\tilde D_{pos} = D_{pos} + offset` (Algorithm 1)."""
+        return self.d_pos + self.offset
+
+    @property
+    def shifted_d_neg(self) -> float:
+        """:math:`\\tilde D_{neg} = D_{neg} + offset` (Algorithm 1)."""
+        return self.d_neg + self.offset
+
+    def params(self) -> dict[str, float]:
+        """The eight parameters as a plain dict, in file order."""
+        return {name: getattr(self, name) for name in PARAM_NAMES}
+
+    # -- envelopes ----------------------------------------------------------------------------
+    def f_up(self, u: np.ndarray | float) -> np.ndarray:
+        """Ascending (loading) envelope of the unshifted model, lines L2, L3, L4."""
+        u = np.asarray(u, dtype=float)
+        return self.h_pos + self.omega * (np.minimum(u - self.dhat_pos, 0.0) + np.maximum(u - self.d_pos, 0.0))
+
+    def f_dn(self, u: np.ndarray | float) -> np.ndarray:
+        """Descending (unloading) envelope of the unshifted model, lines L8, L7, L6."""
+        u = np.asarray(u, dtype=float)
+        return self.h_neg + self.omega * (np.minimum(u - self.d_neg, 0.0) + np.maximum(u - self.dhat_neg, 0.0))
+
+    # -- forward and inverse ------------------------------------------------------------------
+    def _kernel_args(self):
+        return (self.offset, self.d_pos, self.d_neg, self.dhat_pos, self.dhat_neg,
+                self.omega, self.h_pos, self.h_neg)
+
+    def forward(self, q: np.ndarray | Sequence[float], y0: float = 0.0) -> np.ndarray:
+        """Tip angle the model predicts for knob commands ``q``.
+
+        Implements the clamp recursion
+        :math:`y_t = \\min(\\max(y_{t-1}, f_{up}(x_t - offset)), f_{dn}(x_t - offset))`.
+
+        Parameters
+        ----------
+        q : array_like, shape (n,)
+            Knob angles :math:`x_t` (deg).
+        y0 : float
+            The output before the first sample, :math:`y_{-1}` (deg); 0 is the straight tip.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,)
+            Predicted tip angle (deg).
+        """
+        x = np.ascontiguousarray(q, dtype=np.float64)
+        if x.ndim != 1:
+            raise ModelError(f"forward expects a 1-D array of knob angles, got shape {x.shape}")
+        out = np.empty_like(x)
+        _forward_kernel(x, *self._kernel_args(), float(y0), out)
+        return out
+
+    def inverse(self, r: np.ndarray | Sequence[float], y0: float = 0.0,
+                q0: float | None = None) -> np.ndarray:
+        """Knob commands that make the model produce exactly the desired tip angles ``r``.
+
+        When :math:`r_t` rises above the present output the command is the smallest ``x`` on the
+        ascending envelope that reaches it (jumping across the dead zone and the backlash
+        plateau); when it falls, the largest ``x`` on the descending envelope; when it is equal,
+        the command is held. ``forward(inverse(r, y0), y0) == r`` to float precision.
+
+        Parameters
+        ----------
+        r : array_like, shape (n,)
+            Desired tip angles (deg).
+        y0 : float
+            The output before the first sample (deg).
+        q0 : float, optional
+            The knob angle before the first sample; only used when ``r[0] == y0`` (the command
+            is then held). Default: the middle of the knob range that holds ``y0``.
+
+        Returns
+        -------
+        numpy.ndarray, shape (n,)
+            Knob commands (deg).
+        """
+        rr = np.ascontiguousarray(r, dtype=np.float64)
+        if rr.ndim != 1:
+            raise ModelError(f"inverse expects a 1-D array of tip angles, got shape {rr.shape}")
+        if not np.all(np.isfinite(rr)):
+            raise ModelError("inverse: desired tip angles must be finite")
+        if q0 is None:
+            q0 = self.holding_knob_angle(y0)
+        out = np.empty_like(rr)
+        _inverse_kernel(rr, *self._kernel_args(), float(y0), float(q0), out)
+        return out
+
+    def holding_knob_angle(self, y: float) -> float:
+        """Middle of the knob interval (shifted) over which the output ``y`` is held.
+
+        The set of ``u`` with :math:`f_{up}(u) \\le y \\le f_{dn}(u)` is an interval
+        ``[a, b]``: ``a`` is the smallest ``u`` with ``f_dn(u) >= y``, ``b`` the largest with
+        ``f_up(u) <= y``. Used as the command before a trajectory starts, when nothing else is
+        known of the knob.
+        """
+        y = float(y)
+        a = (self.d_neg + (y - self.h_neg) / self.omega) if y < self.h_neg else (
+            self.dhat_neg + (y - self.h_neg) / self.omega if y > self.h_neg else self.d_neg)
+        b = (self.dhat_pos + (y - self.h_pos) / self.omega) if y < self.h_pos else (
+            self.d_pos + (y - self.h_pos) / self.omega if y > self.h_pos else self.d_pos)
+        return 0.5 * (a + b) + self.offset
+
+    # -- shift --------------------------------------------------------------------------------
+    def with_offset(self, offset: float) -> "KnobModel":
+        """The same knob shifted by ``offset`` (absolute, not added)."""
+        return replace(self, offset=float(offset))
+
+    def shifted(self, delta: float) -> "KnobModel":
+        """The same knob with its offset moved by ``delta`` (deg)."""
+        return replace(self, offset=self.offset + float(delta))
+
+
+# --------------------------------------------------------------------------------------------
+# shaft shape -> shift (paper eqs. 1-4)
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Segment:
+    """One bent segment of the proximal shaft, :math:`S_i = (\\alpha_i, \\theta_i)` in degrees."""
+
+    alpha: float
+    theta: float = 0.0
+
+
+@dataclass(frozen=True)
+class Shape:
+    """Shape of the proximal shaft: a sequence of bent segments (empty for a straight shaft)."""
+
+    segments: tuple[Segment, ...] = ()
+
+    @classmethod
+    def parse(cls, text: str | None) -> "Shape":
+        """Parse the ``shape`` metadata value (``straight`` or ``alpha=90,theta=0;alpha=45,...``).
+
+        Raises
+        ------
+        ModelError
+            On a malformed segment (names it).
+        """
+        if text is None:
+            return cls()
+        text = text.strip()
+        if text == "" or text.lower() in ("straight", "none"):
+            return cls()
+        segs = []
+        for part in text.split(";"):
+            part = part.strip()
+            if not part:
+                continue
+            values: dict[str, float] = {}
+            for item in part.split(","):
+                if "=" not in item:
+                    raise ModelError(f"bad shape segment {part!r}: expected alpha=DEG[,theta=DEG]")
+                key, _, val = item.partition("=")
+                key = key.strip().lower()
+                if key not in ("alpha", "theta"):
+                    raise ModelError(f"bad shape segment {part!r}: unknown key {key!r}")
+                try:
+                    values[key] = float(val)
+                except ValueError:
+                    raise ModelError(f"bad shape segment {part!r}: {val.strip()!r} is not a number") from None
+                if not math.isfinite(values[key]):
+                    raise ModelError(f"bad shape segment {part!r}: {key} must be finite")
+            if "alpha" not in values:
+                raise ModelError(f"bad shape segment {part!r}: alpha is missing")
+            segs.append(Segment(values["alpha"], values.get("theta", 0.0)))
+        return cls(tuple(segs))
+
+    def __str__(self) -> str:
+        if not self.segments:
+            return "straight"
+        return ";".join(f"alpha={s.alpha:g},theta={s.theta:g}" for s in self.segments)
+
+    @property
+    def total_curvature(self) -> float:
+        """:math:`\\sum_i |\\alpha_i|` in degrees (drives the ``friction`` effect)."""
+        return float(sum(abs(s.alpha) for s in self.segments))
+
+    def rotated(self, delta_deg: float) -> "Shape":
+        """The shape seen after a bulk rotation of the catheter body by ``delta_deg``."""
+        return Shape(tuple(Segment(s.alpha, s.theta - delta_deg) for s in self.segments))
+
+
+@dataclass(frozen=True)
+class Geometry:
+    """Tendon geometry of a catheter (paper section II-B).
+
+    Parameters
+    ----------
+    beta_catheter_mm : float
+        :math:`\\beta_{catheter}`, distance from the backbone centre to each tendon (mm).
+    beta_knob_mm : float
+        :math:`\\beta_{knob}`, radius of the knob pulley (mm).
+    """
+
+    beta_catheter_mm: float
+    beta_knob_mm: float
+
+    def __post_init__(self) -> None:
+        for name in ("beta_catheter_mm", "beta_knob_mm"):
+            v = getattr(self, name)
+            try:
+                v = float(v)
+            except (TypeError, ValueError):
+                raise ModelError(f"geometry {name} must be a number, got {v!r}") from None
+            if not (math.isfinite(v) and v > 0):
+                raise ModelError(f"invalid geometry: {name} > 0 is violated ({name} = {v})")
+            object.__setattr__(self, name, v)
+
+    def offsets(self, shape: Shape) -> tuple[float, float]:
+        """Shift of knob 1 and knob 2 caused by ``shape`` (paper eqs. 3 and 4).
+
+        :math:`offset_1 = \\frac{180}{\\pi}\\,\\beta_{catheter}\\sum_i \\alpha_i\\cos\\theta_i/\\beta_{knob}`,
+        :math:`offset_2` likewise with :math:`\\sin\\theta_i`; :math:`\\alpha_i` in radians.
+        """
+        s1 = sum(math.radians(s.alpha) * math.cos(math.radians(s.theta)) for s in shape.segments)
+        s2 = sum(math.radians(s.alpha) * math.sin(math.radians(s.theta)) for s in shape.segments)
+        k = math.degrees(1.0) * self.beta_catheter_mm / self.beta_knob_mm
+        return k * s1, k * s2
+
+
+def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[float, float]:
+    """Offsets after a bulk rotation of the catheter body by ``delta_deg``.
+
+    Rotating the body by :math:`\\delta` turns every segment's :math:`\\theta_i` into
+    :math:`\\theta_i - \\delta` in the handle's frame, which rotates the vector
+    :math:`(offset_1, offset_2)` of eqs. 3-4 by :math:`-\\delta` (DESIGN.md section 3; the paper
+    leaves this case out).
+    """
+    c, s = math.cos(math.radians(delta_deg)), math.sin(math.radians(delta_deg))
+    return c * offset1 + s * offset2, -s * offset1 + c * offset2
+
+
+# --------------------------------------------------------------------------------------------
+# the catheter: knobs + geometry + effects
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class EffectSpec:
+    """An unmodelled effect attached to a model (DESIGN.md section 8): its name and parameters."""
+
+    name: str
+    params: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
+
+
+@dataclass(frozen=True)
+class KnobIdentification:
+    """What ``hyst identify`` learnt about one knob beyond its eight parameters.
+
+    Stored in the model file so that ``detect-shift`` can run with no thresholds given.
+
+    Attributes
+    ----------
+    slope_dead_zone : float
+        Typical ``|dC/dq|`` inside the dead zone (current unit per deg).
+    slope_loaded : float
+        Typical ``dC/dq`` once the tendon is taut (current unit per deg).
+    q_min, q_max : float
+        Knob range the model was identified on (deg).
+    rmse : float or None
+        RMSE of the fitted model against the measured tip angle (deg), when ``y`` was present.
+    stderr : mapping
+        One-sigma uncertainty of each identified parameter (deg or deg/deg).
+    """
+
+    slope_dead_zone: float
+    slope_loaded: float
+    q_min: float
+    q_max: float
+    rmse: float | None = None
+    stderr: Mapping[str, float] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
+
+    @property
+    def eps_lower(self) -> float:
+        """Default :math:`\\epsilon_{lower}` of Algorithm 1: halfway (geometric) between the levels."""
+        lo = max(self.slope_dead_zone, 1e-12)
+        hi = max(self.slope_loaded, lo)
+        return math.sqrt(lo * hi) if hi > 4 * lo else 0.5 * (lo + hi)
+
+    @property
+    def eps_upper(self) -> float:
+        """Default :math:`\\epsilon_{upper}` of Algorithm 1 (contact): 5 times the loaded slope."""
+        return 5.0 * self.slope_loaded
+
+
+@dataclass(frozen=True)
+class Model:
+    """A catheter's hysteresis model: one :class:`KnobModel` per knob, plus optional extras.
+
+    Attributes
+    ----------
+    knobs : mapping of int to KnobModel
+        Knob index (1 = anterior-posterior, 2 = right-left) to its model.
+    geometry : Geometry or None
+        Tendon geometry, for the shift a known shape causes.
+    effects : tuple of EffectSpec
+        Unmodelled effects added by ``hyst diagnose``.
+    meta : mapping
+        Free-form provenance (catheter, source, sha256, created).
+    identification : mapping of int to KnobIdentification
+        What identification learnt per knob (current-slope levels, range, uncertainties).
+    """
+
+    knobs: Mapping[int, KnobModel]
+    geometry: Geometry | None = None
+    effects: tuple[EffectSpec, ...] = ()
+    meta: Mapping[str, object] = field(default_factory=dict)
+    identification: Mapping[int, KnobIdentification] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if not self.knobs:
+            raise ModelError("a model needs at least one knob")
+        for k, v in self.knobs.items():
+            if k not in (1, 2):
+                raise ModelError(f"knob {k!r} is not a knob of a two-knob catheter (1 or 2)")
+            if not isinstance(v, KnobModel):
+                raise ModelError(f"knob {k} is not a KnobModel")
+        object.__setattr__(self, "knobs", MappingProxyType(dict(sorted(self.knobs.items()))))
+        object.__setattr__(self, "effects", tuple(self.effects))
+        object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
+        object.__setattr__(self, "identification", MappingProxyType(dict(self.identification)))
+
+    def knob(self, k: int) -> KnobModel:
+        """The model of knob ``k`` (1 or 2)."""
+        try:
+            return self.knobs[int(k)]
+        except (KeyError, ValueError):
+            raise ModelError(f"the model has no knob {k} (it has knobs {', '.join(map(str, self.knobs))})") from None
+
+    def with_knob(self, k: int, knob: KnobModel) -> "Model":
+        """A copy with knob ``k`` replaced."""
+        knobs = dict(self.knobs)
+        knobs[int(k)] = knob
+        return replace(self, knobs=knobs)
+
+    def with_offsets(self, offsets: Mapping[int, float]) -> "Model":
+        """A copy whose knobs carry the given absolute offsets (others unchanged)."""
+        knobs = dict(self.knobs)
+        for k, o in offsets.items():
+            knobs[int(k)] = self.knob(k).with_offset(o)
+        return replace(self, knobs=knobs)
+
+    def without_shift(self) -> "Model":
+        """The straight-shaft model: every offset set to 0 (the paper's Compensation-Only)."""
+        return self.with_offsets({k: 0.0 for k in self.knobs})
+
+    def rotated(self, delta_deg: float) -> "Model":
+        """Both knobs' offsets after a bulk body rotation by ``delta_deg`` (see :func:`rotate_offsets`)."""
+        o1 = self.knobs[1].offset if 1 in self.knobs else 0.0
+        o2 = self.knobs[2].offset if 2 in self.knobs else 0.0
+        n1, n2 = rotate_offsets(o1, o2, delta_deg)
+        offs = {}
+        if 1 in self.knobs:
+            offs[1] = n1
+        if 2 in self.knobs:
+            offs[2] = n2
+        return self.with_offsets(offs)
+
+    def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
+        """Which offset each knob uses for a run with metadata ``meta`` (DESIGN.md section 6).
+
+        The run's ``offsetK`` when present, else the shift the model's geometry gives for the
+        run's ``shape``, else the model's own offset.
+        """
+        result: dict[int, float] = {}
+        shape_offsets = None
+        if self.geometry is not None and meta.get("shape") not in (None, ""):
+            shape_offsets = self.geometry.offsets(Shape.parse(meta["shape"]))
+        for k, knob in self.knobs.items():
+            key = f"offset{k}"
+            if key in meta and str(meta[key]).strip() != "":
+                try:
+                    result[k] = float(meta[key])
+                except ValueError:
+                    raise ModelError(f"run metadata {key}: {meta[key]!r} is not a number") from None
+                if not math.isfinite(result[k]):
+                    raise ModelError(f"run metadata {key} must be finite")
+            elif shape_offsets is not None:
+                result[k] = shape_offsets[k - 1]
+            else:
+                result[k] = knob.offset
+        return result
