@@ -448,6 +448,9 @@ class KnobIdentification:
         RMSE of the fitted model against the measured tip angle (deg), when ``y`` was present.
     stderr : mapping
         One-sigma uncertainty of each identified parameter (deg or deg/deg).
+    current_dead_zone : float or None
+        Typical motor current inside the dead zone (no tendon taut), so a search that starts
+        with a tendon already taut can tell which one from the current level.
     """
 
     slope_dead_zone: float
@@ -456,6 +459,7 @@ class KnobIdentification:
     q_max: float
     rmse: float | None = None
     stderr: Mapping[str, float] = field(default_factory=dict)
+    current_dead_zone: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
