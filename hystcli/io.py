@@ -208,6 +208,12 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     header_line = i + 1  # 1-based line number of the header
     if not body.strip():
         raise DataError(f"{source}: no data rows after the header")
+    # pandas would silently shift a row with the wrong number of fields into an index column
+    ncomma = len(header) - 1
+    for j, line in enumerate(lines[i + 1:]):
+        if line.count(",") != ncomma and line.strip():
+            raise DataError(f"{source}: line {header_line + 1 + j} has {line.count(',') + 1} fields, "
+                            f"the header has {len(header)}")
     try:
         df = pd.read_csv(_io.StringIO(body), header=None, names=header, dtype=np.float64,
                          skip_blank_lines=True, comment=None, engine="c")

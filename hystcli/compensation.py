@@ -1,0 +1,136 @@
+"""Inverse-model compensation of desired trajectories, and the model's prediction of a run.
+
+``compensate`` turns desired tip angles ``r<k>`` into knob commands ``q<k>`` through the exact
+inverse of each knob's model (DESIGN.md section 3), shifted by the offset in effect for the
+trajectory (the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
+Compensation-Only). ``predict`` runs the model forward on a run's commands: the "sim" that the
+evaluation and the diagnosis compare with measurement.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import DataError, ModelError
+from .io import Run
+from .model import Model
+
+
+@dataclass(frozen=True)
+class Compensation:
+    """Result of :func:`compensate`.
+
+    Attributes
+    ----------
+    run : Run
+        The trajectory with ``q<k>`` added and metadata ``controller``, ``offset<k>`` set.
+    offsets : dict of int to float
+        Offset used per knob (deg).
+    warnings : tuple of str
+        Things the user should know (e.g. commands outside the identified range).
+    """
+
+    run: Run
+    offsets: dict
+    warnings: tuple = ()
+
+
+def _knobs_of(model: Model, run: Run, prefix: str, what: str) -> list[int]:
+    knobs = run.knobs(prefix)
+    if not knobs:
+        raise DataError(f"{run.source or 'run'}: no {what} column ({prefix}1 or {prefix}2)")
+    for k in knobs:
+        if k not in model.knobs:
+            raise ModelError(f"{run.source or 'run'} has column {prefix}{k} but the model has no knob {k} "
+                             f"(it has knobs {', '.join(map(str, model.knobs))})")
+    return knobs
+
+
+def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Compensation:
+    """Knob commands that make the model follow the desired tip angles.
+
+    Parameters
+    ----------
+    model : Model
+        Identified (and possibly shifted) model.
+    trajectory : Run
+        Desired tip angles ``r1`` and/or ``r2`` with time ``t``.
+    ignore_shift : bool
+        Use offset 0 for every knob (Compensation-Only) instead of the offset in effect
+        (Compensation+Shift; which offset is DESIGN.md section 6's rule, :meth:`Model.offsets_for`).
+
+    Returns
+    -------
+    Compensation
+    """
+    knobs = _knobs_of(model, trajectory, "r", "desired tip angle")
+    offsets = {k: 0.0 for k in knobs} if ignore_shift else {
+        k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
+    new_cols: dict[str, np.ndarray] = {}
+    warnings: list[str] = []
+    for k in knobs:
+        knob = model.knob(k).with_offset(offsets[k])
+        q = knob.inverse(trajectory[f"r{k}"], y0=0.0)
+        new_cols[f"q{k}"] = q
+        ident = model.identification.get(k)
+        if ident is not None:
+            u = q - offsets[k]
+            lo, hi = float(np.min(u)), float(np.max(u))
+            if lo < ident.q_min - 1e-9 or hi > ident.q_max + 1e-9:
+                warnings.append(
+                    f"knob {k}: commands reach {lo:.1f}..{hi:.1f} deg (relative to the offset), outside "
+                    f"the identified range {ident.q_min:.1f}..{ident.q_max:.1f} deg: the model is extrapolated")
+    controller = "comp" if ignore_shift or all(o == 0.0 for o in offsets.values()) else "comp+shift"
+    cols = {"t": trajectory.t}
+    for name, values in trajectory.columns.items():
+        if name != "t" and not (name.startswith("q") and name[1:] in ("1", "2")):
+            cols[name] = values
+    cols.update(new_cols)
+    meta = dict(trajectory.meta)
+    meta["controller"] = controller
+    for k in knobs:
+        meta[f"offset{k}"] = repr(float(offsets[k]))
+    return Compensation(Run(cols, meta, trajectory.source), offsets, tuple(warnings))
+
+
+def predict_tip(model: Model, run: Run) -> dict[int, np.ndarray]:
+    """Tip angle the model (with its effects, if any) predicts for the run's commands ``q<k>``.
+
+    Each knob uses the offset in effect for the run (:meth:`Model.offsets_for`) and starts from
+    the run's first measured ``y<k>`` when there is one, else from 0 (DESIGN.md section 3).
+    """
+    knobs = _knobs_of(model, run, "q", "knob command")
+    if model.effects:
+        from .effects import predict as predict_with_effects
+
+        ys = predict_with_effects(model, run)
+        return {k: ys[k] for k in knobs}
+    offsets = model.offsets_for(run.meta)
+    out = {}
+    for k in knobs:
+        y0 = float(run[f"y{k}"][0]) if f"y{k}" in run else 0.0
+        out[k] = model.knob(k).with_offset(offsets[k]).forward(run[f"q{k}"], y0=y0)
+    return out
+
+
+def predict(model: Model, run: Run) -> Run:
+    """The run with ``y<k>`` replaced by the model's prediction.
+
+    A measured ``y<k>`` is kept as ``y<k>_measured`` so that the file shows sim beside real.
+    """
+    ys = predict_tip(model, run)
+    cols: dict[str, np.ndarray] = {}
+    for name, values in run.columns.items():
+        if name in (f"y{k}" for k in ys):
+            cols[f"{name}_measured"] = values
+        else:
+            cols[name] = values
+    for k, y in ys.items():
+        cols[f"y{k}"] = y
+    meta = dict(run.meta)
+    meta["predicted_by"] = "hyst predict"
+    offsets = model.offsets_for(run.meta)
+    for k in ys:
+        meta.setdefault(f"offset{k}", repr(float(offsets[k])))
+    return Run(cols, meta, run.source)

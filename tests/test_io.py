@@ -1,0 +1,182 @@
+"""Tests of hystcli.io: run CSV and model JSON readers/writers, validation, atomic writes."""
+from __future__ import annotations
+
+import json
+import os
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from hystcli.errors import DataError, ModelError
+from hystcli.io import (Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
+                        parse_run, read_run, save_model, write_run)
+from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
+
+GOOD = "# catheter: ice-a\n# shape: alpha=90,theta=0\n# lab_note: kept\nt,q1,y1\n0,0,0\n0.1,1.5,0.2\n0.2,3,0.4\n"
+
+
+def test_read_run_keeps_metadata_and_columns(tmp_path):
+    p = tmp_path / "run.csv"
+    p.write_text(GOOD)
+    run = read_run(p, require=("q1",))
+    assert list(run.columns) == ["t", "q1", "y1"]
+    assert run.meta["catheter"] == "ice-a"
+    assert run.meta["shape"] == "alpha=90,theta=0"
+    assert run.unknown_meta() == ["lab_note"]
+    np.testing.assert_array_equal(run["q1"], [0, 1.5, 3])
+    assert run.knobs() == [1]
+
+
+@pytest.mark.parametrize("text, message", [
+    ("", "empty file"),
+    ("# catheter: x\n", "empty file"),
+    ("t,q1\n", "no data rows"),
+    ("t,q1\n0,1\n0.1,nan\n", "column 'q1', line 3: NaN"),
+    ("t,q1\n0,1\n0.1,\n", "column 'q1', line 3: NaN"),
+    ("t,q1\n0,1\n0.1,abc\n", "column 'q1', line 3: 'abc' is not a number"),
+    ("t,q1\n0,1\n0.1,inf\n", "infinite"),
+    ("t,q1\n0,1\n0,2\n", "not strictly increasing at line 3"),
+    ("t,q1\n0.2,1\n0.1,2\n", "not strictly increasing"),
+    ("q1,y1\n0,1\n", "missing column 't'"),
+    ("t,q1,q1\n0,1,2\n", "appears twice"),
+    ("t,q1\n0,1,5\n", "line 2 has 3 fields, the header has 2"),
+    ("t,q1,y1\n0,1\n", "line 2 has 2 fields, the header has 3"),
+])
+def test_bad_runs_are_refused_with_a_clear_message(text, message):
+    with pytest.raises(DataError, match=message):
+        parse_run(text, source="x.csv", require=())
+
+
+def test_missing_required_column_and_file(tmp_path):
+    p = tmp_path / "run.csv"
+    p.write_text(GOOD)
+    with pytest.raises(DataError, match="missing column 'c1'"):
+        read_run(p, require=("c1",))
+    with pytest.raises(DataError, match="no such file"):
+        read_run(tmp_path / "nope.csv")
+    with pytest.raises(DataError, match="is a directory"):
+        read_run(tmp_path)
+    (tmp_path / "bin.csv").write_bytes(b"\xff\xfe\x00\x01")
+    with pytest.raises(DataError, match="not a text CSV"):
+        read_run(tmp_path / "bin.csv")
+
+
+finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(n=st.integers(1, 30), data=st.data(),
+       meta=st.dictionaries(st.from_regex(r"[a-z][a-z0-9_]{0,8}", fullmatch=True),
+                            st.from_regex(r"[A-Za-z0-9=,;.+\- ]{0,20}", fullmatch=True).map(str.strip),
+                            max_size=5))
+def test_run_round_trip_is_lossless(tmp_path, n, data, meta):
+    t = np.cumsum(data.draw(st.lists(st.floats(1e-6, 10), min_size=n, max_size=n)))
+    cols = {"t": t}
+    for name in ("q1", "y1", "c2"):
+        cols[name] = np.array(data.draw(st.lists(finite, min_size=n, max_size=n)))
+    run = Run(cols, meta)
+    p = tmp_path / "rt.csv"
+    write_run(p, run)
+    back = read_run(p)
+    assert dict(back.meta) == dict(run.meta)
+    assert list(back.columns) == list(run.columns)
+    for name in cols:
+        np.testing.assert_array_equal(back[name], cols[name])  # bit-exact, not approximately
+
+
+def sample_model():
+    return Model(
+        {1: KnobModel(9.1, -8.7, 6.2, 5.9, 1.45, -4.0, 4.2, 1.25),
+         2: KnobModel(8.0, -9.0, 5.0, 6.0, 1.5, -3.0, 3.5)},
+        Geometry(1.2, 8.0),
+        (EffectSpec("friction", {"mu": 0.3}),),
+        {"catheter": "ice-a", "source": "sweep.csv"},
+        {1: KnobIdentification(0.05, 4.8, -40.0, 40.0, 0.31, {"d_pos": 0.02}, 120.0)},
+    )
+
+
+@settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(vals=st.lists(st.floats(-50, 50), min_size=3, max_size=3), offset=st.floats(-40, 40))
+def test_model_round_trip_is_lossless(tmp_path, vals, offset):
+    base = sample_model()
+    k = KnobModel(9.1 + abs(vals[0]), -8.7 - abs(vals[1]), 6.2, 5.9, 1.45, -4.0, 4.2, offset)
+    m = base.with_knob(1, k)
+    p = tmp_path / "m.json"
+    save_model(p, m)
+    back = load_model(p)
+    assert model_to_dict(back) == model_to_dict(m)
+    assert back.knob(1) == k
+    assert dumps_model(back) == p.read_text()
+
+
+@pytest.mark.parametrize("mutate, message", [
+    (lambda d: d.update(version=2), "unknown model version 2"),
+    (lambda d: d.update(format="other"), "not a hyst model"),
+    (lambda d: d["knobs"]["1"].pop("omega"), "missing parameter omega"),
+    (lambda d: d["knobs"]["1"].update(omega=-1), "omega > 0 is violated"),
+    (lambda d: d["knobs"]["1"].update(b_pos=-1), "b_pos >= 0 is violated"),
+    (lambda d: d["knobs"]["1"].update(d_pos="9"), "must be a number"),
+    (lambda d: d["knobs"]["1"].update(gain=2), "unknown parameter 'gain'"),
+    (lambda d: d["knobs"].update({"3": d["knobs"]["1"]}), "unknown knob '3'"),
+    (lambda d: d.update(knobs={}), "knobs"),
+    (lambda d: d["geometry"].update(beta_knob_mm=0), "beta_knob_mm > 0"),
+])
+def test_bad_models_are_refused(mutate, message):
+    d = model_to_dict(sample_model())
+    mutate(d)
+    with pytest.raises(ModelError, match=message):
+        model_from_dict(d)
+
+
+def test_bad_model_files(tmp_path):
+    with pytest.raises(ModelError, match="no such model file"):
+        load_model(tmp_path / "nope.json")
+    (tmp_path / "e.json").write_text("")
+    with pytest.raises(ModelError, match="empty model file"):
+        load_model(tmp_path / "e.json")
+    (tmp_path / "b.json").write_text("{not json")
+    with pytest.raises(ModelError, match="not valid JSON"):
+        load_model(tmp_path / "b.json")
+    d = model_to_dict(sample_model())
+    d["knobs"]["1"]["d_pos"] = float("nan")
+    (tmp_path / "n.json").write_text(json.dumps(d))
+    with pytest.raises(ModelError, match="finite"):
+        load_model(tmp_path / "n.json")
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    p = tmp_path / "out.csv"
+    p.write_text("old contents")
+
+    class Boom(Run):
+        pass
+
+    run = Run({"t": [0.0, 1.0]}, {})
+    # a failure inside the writer leaves the old file intact and no temporary file behind
+    from hystcli import io as hio
+
+    def bad_writer(f):
+        f.write(b"partial")
+        raise RuntimeError("disk on fire")
+
+    with pytest.raises(RuntimeError):
+        hio.atomic_write(p, bad_writer)
+    assert p.read_text() == "old contents"
+    assert sorted(os.listdir(tmp_path)) == ["out.csv"]
+    write_run(p, run)
+    assert read_run(p)["t"].tolist() == [0.0, 1.0]
+
+
+def test_refuses_to_overwrite_an_input(tmp_path):
+    p = tmp_path / "run.csv"
+    p.write_text(GOOD)
+    with pytest.raises(DataError, match="refusing to overwrite an input"):
+        write_run(p, read_run(p), inputs=[p])
+    assert p.read_text() == GOOD
+
+
+def test_format_run_text():
+    text = format_run(Run({"t": [0.0, 0.5], "q1": [0.1, -2.0]}, {"catheter": "x"}))
+    assert text == "# catheter: x\nt,q1\n0.0,0.1\n0.5,-2.0\n"
