@@ -1,20 +1,25 @@
 """The virtual catheter: a seeded simulator of the physical system the paper measured.
 
 It owns the true parameters of named virtual catheters, the motions of the paper's protocol
-(sweep, periodic, non-periodic), the motor-current model of DESIGN.md section 4 and the sensor
-chain (EM-tracker noise, 20 Hz Butterworth). The demo, the tests, the sample data and the serial
-emulator all draw their data from :func:`simulate`.
+(sweep, periodic, non-periodic), the motor-current model of DESIGN.md section 4, the sensor chain
+(EM-tracker noise, 20 Hz Butterworth) and two ways to run it: :func:`simulate` (a whole run at
+once; the demo, the tests, the sample data, ``hyst simulate`` through :func:`simulate_motion`)
+and :class:`LiveTwin` (move by move, for the serial emulator), which carry the same states and
+so give the same samples. The tip angle comes from :mod:`hystcli.effects` (the base model of
+DESIGN.md section 3 plus the unmodelled effects of section 8); this module adds the current.
 
-Motor current (signed, mA), for knob angle ``u`` relative to the shifted edges::
+Motor current (signed, mA), for the tendon input ``u`` (the knob angle seen through the coupling
+and rate effects) relative to the shifted edges::
 
     T      = k_load * ((u - d~_pos)+ - (d~_neg - u)+)      tendon tension: 0 while both are slack
     phi    = play operator on u of width b (in [-1, 1])     +1 while pulling the anterior tendon
-    c      = c_no_load + c_coulomb * tanh(dq/dt / v_s) + T + mu * |T| * phi + noise
+    c      = c_no_load + c_coulomb * tanh(dq/dt / v_s) + T + mu * |T| * phi + contact + noise
 
 So the current is flat in the dead zone (no tendon taut), rises with slope ``k_load (1 +- mu)``
 once a tendon is taut, and after a reversal falls steeply by ``2 mu |T|`` over the backlash width
 ``b`` while the sheath friction changes sign (the current's signature of backlash). Contact with
-a wall adds a far steeper term (the ``contact`` effect).
+a wall adds ``stiffness`` mA per degree of knob past it (the ``contact`` effect). The motor
+velocity ``dq/dt`` is a backward difference, so the live twin can compute it causally.
 """
 from __future__ import annotations
 
@@ -26,8 +31,11 @@ from typing import Mapping, Sequence
 import numpy as np
 from numba import njit
 
+from scipy import signal
+
+from .effects import (ChainState, Effect, as_effects, contact_current, format_effects, tip_chain)
 from .errors import DataError, ModelError
-from .filters import lowpass
+from .filters import butter_sos, lowpass
 from .io import Run
 from .model import EffectSpec, Geometry, KnobModel, Model, Shape
 
@@ -174,10 +182,10 @@ def nonperiodic(amplitude: float = 30.0, freq: float = 0.02, duration: float = 1
 # the physics
 # --------------------------------------------------------------------------------------------
 @njit(cache=True)
-def _play(u, width, phi0, out):
+def _play(u, width, phi0, prev0, out):
     # play (backlash) operator normalised to [-1, 1]: moves 2/width per degree of knob travel
     phi = phi0
-    prev = u[0]
+    prev = prev0
     for i in range(u.shape[0]):
         if width[i] > 0:
             phi += 2.0 * (u[i] - prev) / width[i]
@@ -196,26 +204,104 @@ def _play(u, width, phi0, out):
     return phi
 
 
+@dataclass
+class CurrentState:
+    """What the motor-current model of one knob carries between calls (the live twin).
+
+    Attributes
+    ----------
+    phi : float
+        Friction play state in [-1, 1].
+    u_prev : float
+        Last knob input relative to the shift (deg).
+    q_prev, t_prev : float
+        Last motor angle (deg) and time (s), for the backward-difference velocity.
+    """
+
+    phi: float = 0.0
+    u_prev: float | None = None
+    q_prev: float | None = None
+    t_prev: float | None = None
+
+
 def motor_current(knob: KnobModel, cur: CurrentParams, q: np.ndarray, t: np.ndarray,
-                  phi0: float = 0.0) -> np.ndarray:
+                  phi0: float = 0.0, *, x: np.ndarray | None = None,
+                  state: CurrentState | None = None) -> np.ndarray:
     """Noise-free motor current (mA) of one knob for commands ``q`` at times ``t``.
 
-    ``knob`` carries the shift in its ``offset``; see the module docstring for the model.
+    Parameters
+    ----------
+    knob : KnobModel
+        The knob, carrying the shift in its ``offset``.
+    cur : CurrentParams
+    q : numpy.ndarray
+        Motor (knob) angles, deg: drive the Coulomb term through their velocity.
+    t : numpy.ndarray
+        Sample times, s.
+    phi0 : float
+        Initial friction play state (when ``state`` is not given).
+    x : numpy.ndarray, optional
+        The input the tendons see, when effects make it differ from ``q`` (coupling, rate).
+    state : CurrentState, optional
+        Carried between calls; updated in place.
+
+    Notes
+    -----
+    The velocity is the backward difference ``(q_i - q_{i-1}) / (t_i - t_{i-1})`` (causal, so
+    the live twin can compute it), the first sample of a run taking the second's.
     """
-    u = np.asarray(q, float) - knob.offset
+    q = np.asarray(q, float)
+    u = (q if x is None else np.asarray(x, float)) - knob.offset
     tension = cur.k_load * (np.maximum(u - knob.d_pos, 0.0) - np.maximum(knob.d_neg - u, 0.0))
     # the friction play uses the backlash width of the side whose tendon is taut
     width = np.where(u >= 0.5 * (knob.d_pos + knob.d_neg), knob.b_pos, knob.b_neg)
     phi = np.empty_like(u)
+    v = np.zeros_like(q)
+    t = np.asarray(t, float)
     if u.size:
-        _play(u, width, phi0, phi)
-    v = np.gradient(np.asarray(q, float), t) if len(t) > 1 else np.zeros_like(u)
+        fresh = state is None or state.u_prev is None
+        phi_start = phi0 if state is None else state.phi
+        phi_end = _play(u, width, phi_start, u[0] if fresh else state.u_prev, phi)
+        if q.size > 1:
+            v[1:] = np.diff(q) / np.diff(t)
+        if fresh:
+            v[0] = v[1] if q.size > 1 else 0.0
+        else:
+            v[0] = (q[0] - state.q_prev) / (t[0] - state.t_prev)
+        if state is not None:
+            state.phi, state.u_prev = float(phi_end), float(u[-1])
+            state.q_prev, state.t_prev = float(q[-1]), float(t[-1])
     return cur.no_load + cur.coulomb * np.tanh(v / cur.v_smooth) + tension + cur.mu * np.abs(tension) * phi
+
+
+def _knob_signals(catheter: VirtualCatheter, knobs: Mapping[int, KnobModel], q: Mapping[int, np.ndarray],
+                  t: np.ndarray, effects: Sequence[Effect], shape: Shape,
+                  chain: Mapping[int, ChainState] | None = None,
+                  current: Mapping[int, CurrentState] | None = None):
+    # noise-free (tip reported by the tracker, motor current) per knob
+    ys, cs = {}, {}
+    for k, knob in knobs.items():
+        cstate = None if current is None else current[k]
+        if not effects:
+            # the base model, on the very code path of KnobModel.forward
+            y0 = 0.0
+            if chain is not None and chain[k].y is not None:
+                y0 = chain[k].y
+            ys[k] = knob.forward(q[k], y0)
+            if chain is not None and ys[k].size:
+                chain[k].y = float(ys[k][-1])
+            cs[k] = motor_current(knob, catheter.current, q[k], t, state=cstate)
+            continue
+        tr = tip_chain(knob, k, q, t, effects, shape, 0.0, None if chain is None else chain[k])
+        ys[k] = tr.y
+        cs[k] = motor_current(tr.knob, catheter.current, q[k], t, x=tr.x, state=cstate) \
+            + contact_current(tr, effects)
+    return ys, cs
 
 
 def simulate(catheter: VirtualCatheter, t: np.ndarray, q: Mapping[int, np.ndarray], *,
              shape: Shape = Shape(), rotation: float = 0.0,
-             effects: Sequence[EffectSpec] | None = None, seed: int = 0, noise: bool = True,
+             effects: Sequence[Effect | EffectSpec] | None = None, seed: int = 0, noise: bool = True,
              r: Mapping[int, np.ndarray] | None = None, meta: Mapping[str, object] | None = None,
              filter_hz: float | None = 20.0) -> Run:
     """Run the virtual catheter on knob commands and record what a lab would.
@@ -228,11 +314,13 @@ def simulate(catheter: VirtualCatheter, t: np.ndarray, q: Mapping[int, np.ndarra
     q : mapping of int to numpy.ndarray
         Knob commands per knob (deg); 1-DoF runs give one knob.
     shape : Shape
-        Shaft shape; shifts each knob by the catheter's geometry (paper eqs. 1-4).
+        Shaft shape; shifts each knob by the catheter's geometry (paper eqs. 1-4) and is the
+        condition of the friction and deadzone effects.
     rotation : float
         Bulk rotation of the catheter body (deg).
-    effects : sequence of EffectSpec, optional
-        Unmodelled effects; ``None`` means the catheter's defaults, ``()`` none.
+    effects : sequence of Effect or EffectSpec, optional
+        Unmodelled effects (:mod:`hystcli.effects`); ``None`` means the catheter's defaults,
+        ``()`` none.
     seed : int
         Seed of the sensor noise; the same arguments give the same run.
     noise : bool
@@ -242,25 +330,29 @@ def simulate(catheter: VirtualCatheter, t: np.ndarray, q: Mapping[int, np.ndarra
     meta : mapping, optional
         Extra metadata (controller, motion, trial, ...).
     filter_hz : float or None
-        Cut-off of the recording filter (the paper's 20 Hz); None records unfiltered.
+        Cut-off of the recording filter (the paper's 20 Hz, zero-phase); None records unfiltered.
 
     Returns
     -------
     Run
-        Columns ``t``, ``q<k>``, ``y<k>``, ``c<k>`` (and ``r<k>``) per knob, metadata with the
-        catheter, shape, rotation and the true offsets.
+        Columns ``t``, ``q<k>``, ``y<k>``, ``c<k>`` (and ``r<k>``) per knob; metadata with the
+        catheter, shape, rotation, the true offsets ``true_offset<k>``, the effects and the seed.
+        Without noise and effects, ``y<k>`` is exactly the base model's ``forward(q<k>)``.
     """
-    from . import effects as effects_mod  # effects build on the twin's signals
-
-    t = np.asarray(t, dtype=float)
-    if effects is None:
-        effects = catheter.default_effects
+    t = np.ascontiguousarray(t, dtype=float)
+    effs = as_effects(catheter.default_effects if effects is None else effects)
     rng = np.random.default_rng(seed)
     offs = catheter.true_offsets(shape, rotation)
     fs = 1.0 / float(np.median(np.diff(t))) if t.size > 1 else 1.0
+    for k in q:
+        if k not in catheter.knobs:
+            raise ModelError(f"virtual catheter {catheter.name} has no knob {k!r}")
     knobs = {k: catheter.knobs[k].with_offset(offs[k]) for k in sorted(q)}
-    qs = {k: np.asarray(q[k], dtype=float) for k in knobs}
-    ys, cs = effects_mod.apply(list(effects), catheter, knobs, qs, t, shape)
+    qs = {k: np.ascontiguousarray(q[k], dtype=float) for k in knobs}
+    for k in knobs:
+        if qs[k].shape != t.shape:
+            raise DataError(f"knob {k} commands have {qs[k].size} samples, t has {t.size}")
+    ys, cs = _knob_signals(catheter, knobs, qs, t, effs, shape)
     cols: dict[str, np.ndarray] = {"t": t}
     for k in knobs:
         y, c = ys[k], cs[k]
@@ -280,11 +372,288 @@ def simulate(catheter: VirtualCatheter, t: np.ndarray, q: Mapping[int, np.ndarra
         run_meta["rotation"] = f"{rotation:g}"
     for k in knobs:
         run_meta[f"true_offset{k}"] = f"{offs[k]:.6f}"
-    if effects:
-        run_meta["effects"] = ";".join(
-            e.name + ("(" + ",".join(f"{p}={v:g}" for p, v in e.params.items()) + ")" if e.params else "")
-            for e in effects)
+    if effs:
+        run_meta["effects"] = format_effects(effs)
     run_meta["seed"] = str(seed)
     if meta:
         run_meta.update({k: v for k, v in meta.items() if v is not None})
     return Run(cols, {k: str(v) for k, v in run_meta.items()})
+
+
+# --------------------------------------------------------------------------------------------
+# the live twin (for the serial emulator)
+# --------------------------------------------------------------------------------------------
+class LiveTwin:
+    """The virtual catheter stepped move by move, as a robot would be (for the serial emulator).
+
+    Every knob advances on one shared clock: while one knob moves, the others hold their angle
+    (and their effects, like creep, go on in time). The hysteresis, play, lag, tracker and filter
+    states are carried between moves, so the samples of a sequence of moves are those of one
+    batch :func:`simulate` of the concatenated motion (noise aside).
+
+    Parameters
+    ----------
+    catheter : VirtualCatheter
+    shape : Shape
+        Shaft shape (change it with :meth:`set_shape`).
+    rotation : float
+        Bulk rotation of the catheter body (deg).
+    effects : sequence of Effect or EffectSpec
+        Unmodelled effects; ``()`` none, ``None`` the catheter's defaults.
+    seed : int
+        Seed of the current and EM noise.
+    knobs : tuple of int
+        The knobs the robot has.
+    noise : bool
+        Add current noise (before the filter) and EM noise (on the tip reading).
+    tip_available : bool
+        Whether an EM tracker is fitted; without one the tip reading is NaN.
+    filter_hz : float or None
+        Cut-off of the causal Butterworth filter on the current (the paper's 20 Hz).
+    record : bool
+        Keep every sample (:meth:`recorded`), noise-free current before the filter included.
+    """
+
+    def __init__(self, catheter: VirtualCatheter, shape: Shape = Shape(), rotation: float = 0.0,
+                 effects: Sequence[Effect | EffectSpec] | None = (), seed: int = 0,
+                 knobs: Sequence[int] = (1, 2), *, noise: bool = True, tip_available: bool = True,
+                 filter_hz: float | None = 20.0, record: bool = False) -> None:
+        self.catheter = catheter
+        self.knobs = tuple(int(k) for k in knobs)
+        if not self.knobs:
+            raise ModelError("a live twin needs at least one knob")
+        for k in self.knobs:
+            if k not in catheter.knobs:
+                raise ModelError(f"virtual catheter {catheter.name} has no knob {k!r}")
+        self.effects = as_effects(catheter.default_effects if effects is None else effects)
+        self.noise = bool(noise)
+        self.tip_available = bool(tip_available)
+        self.filter_hz = filter_hz
+        # separate streams: reading the tip (or not) must not change the current's noise
+        cur_seq, em_seq = np.random.SeedSequence(int(seed)).spawn(2)
+        self._rng_current = np.random.default_rng(cur_seq)
+        self._rng_em = np.random.default_rng(em_seq)
+        self.t = 0.0
+        self._started = False
+        self._q = {k: 0.0 for k in self.knobs}
+        self._c = {k: catheter.current.no_load for k in self.knobs}
+        self._y = {k: 0.0 for k in self.knobs}
+        self._chain = {k: ChainState() for k in self.knobs}
+        self._cur = {k: CurrentState() for k in self.knobs}
+        self._zi: dict[int, np.ndarray] = {}
+        self._sos_dt: float | None = None
+        self._sos = None
+        self._record = bool(record)
+        self._log: list[dict[str, np.ndarray]] = []
+        self.set_shape(shape, rotation)
+
+    # -- configuration --------------------------------------------------------------------------
+    def set_shape(self, shape: Shape, rotation: float = 0.0) -> None:
+        """Bend the shaft into ``shape`` (the knobs' states are kept: the shift moves under them)."""
+        self.shape = shape
+        self.rotation = float(rotation)
+        offs = self.catheter.true_offsets(shape, rotation)
+        self.true_offsets = {k: offs[k] for k in self.knobs}
+        self._models = {k: self.catheter.knobs[k].with_offset(offs[k]) for k in self.knobs}
+
+    def _check_knob(self, knob: int) -> int:
+        try:
+            k = int(knob)
+        except (TypeError, ValueError):
+            raise DataError(f"bad knob {knob!r}") from None
+        if k not in self.knobs:
+            raise DataError(f"no knob {knob!r} (knobs: {', '.join(map(str, self.knobs))})")
+        return k
+
+    # -- motion ---------------------------------------------------------------------------------
+    def move(self, knob: int, q_target: float, speed_deg_s: float = 20.0,
+             dt: float = 0.001) -> tuple[float, float, float]:
+        """Turn ``knob`` to ``q_target`` at constant speed, sampling every ``dt`` seconds.
+
+        Returns
+        -------
+        tuple of float
+            ``(knob angle, filtered motor current at the last sample (still moving), tip
+            angle read by the EM tracker)``; the tip is NaN without a tracker.
+        """
+        k = self._check_knob(knob)
+        q_target = float(q_target)
+        if not math.isfinite(q_target):
+            raise DataError(f"knob {k} target must be finite, got {q_target}")
+        if not (speed_deg_s > 0 and math.isfinite(speed_deg_s)):
+            raise DataError(f"speed must be positive, got {speed_deg_s}")
+        if not (dt > 0 and math.isfinite(dt)):
+            raise DataError(f"sample interval dt must be positive, got {dt}")
+        q0 = self._q[k]
+        n = max(1, int(math.ceil(abs(q_target - q0) / (speed_deg_s * dt) - 1e-9)))
+        steps = np.arange(1, n + 1)
+        qk = q0 + (q_target - q0) * (steps / n)
+        qk[-1] = q_target
+        t = self.t + dt * steps
+        if not self._started:
+            # the robot's first sample: the knobs at rest where they start
+            qk = np.concatenate([[q0], qk])
+            t = np.concatenate([[self.t], t])
+            self._started = True
+        qs = {j: (qk if j == k else np.full(t.shape, self._q[j])) for j in self.knobs}
+        self._advance(t, qs, dt)
+        return self.state(k)
+
+    def hold(self, duration: float, dt: float = 0.001) -> None:
+        """Let ``duration`` seconds pass with every knob still (creep and the tracker go on)."""
+        n = max(1, int(round(duration / dt)))
+        t = self.t + dt * np.arange(1, n + 1)
+        if not self._started:
+            t = np.concatenate([[self.t], t])
+            self._started = True
+        self._advance(t, {j: np.full(t.shape, self._q[j]) for j in self.knobs}, dt)
+
+    def _advance(self, t: np.ndarray, qs: Mapping[int, np.ndarray], dt: float) -> None:
+        ys, cs = _knob_signals(self.catheter, self._models, qs, t, self.effects, self.shape,
+                               self._chain, self._cur)
+        if self._sos_dt != dt and self.filter_hz is not None:
+            self._sos = butter_sos(1.0 / dt, self.filter_hz)
+            self._sos_dt = dt
+        for k in self.knobs:
+            c = cs[k]
+            if self.noise:
+                c = c + self._rng_current.normal(0.0, self.catheter.current.noise, c.shape)
+            if self.filter_hz is not None:
+                if k not in self._zi or self._zi[k].shape[0] != self._sos.shape[0]:
+                    self._zi[k] = signal.sosfilt_zi(self._sos) * c[0]
+                cf, self._zi[k] = signal.sosfilt(self._sos, c, zi=self._zi[k])
+            else:
+                cf = c
+            self._q[k] = float(qs[k][-1])
+            self._c[k] = float(cf[-1])
+            self._y[k] = float(ys[k][-1])
+            if self._record:
+                self._log.append({"k": k, "t": t, "q": qs[k], "y": ys[k], "c_raw": cs[k], "c": cf})
+        self.t = float(t[-1])
+
+    # -- readings -------------------------------------------------------------------------------
+    def state(self, knob: int) -> tuple[float, float, float]:
+        """``(knob angle, filtered motor current, tip angle read now)`` without moving."""
+        k = self._check_knob(knob)
+        if not self.tip_available:
+            tip = math.nan
+        elif self.noise:
+            tip = self._y[k] + float(self._rng_em.normal(0.0, self.catheter.em_noise_deg))
+        else:
+            tip = self._y[k]
+        return self._q[k], self._c[k], tip
+
+    def recorded(self) -> Run:
+        """Every sample so far (needs ``record=True``): ``t``, ``q<k>``, ``y<k>`` (noise-free
+        tip), ``c<k>`` (noise-free current before the filter), ``cf<k>`` (filtered current)."""
+        if not self._record:
+            raise DataError("this live twin was made without record=True")
+        cols: dict[str, list] = {}
+        ts = [e["t"] for e in self._log if e["k"] == self.knobs[0]]
+        cols["t"] = np.concatenate(ts) if ts else np.empty(0)
+        for k in self.knobs:
+            for name, key in (("q", "q"), ("y", "y"), ("c", "c_raw"), ("cf", "c")):
+                parts = [e[key] for e in self._log if e["k"] == k]
+                cols[f"{name}{k}"] = np.concatenate(parts) if parts else np.empty(0)
+        meta = {"catheter": self.catheter.name, "shape": str(self.shape),
+                "effects": format_effects(self.effects)}
+        return Run(cols, meta, "live twin")
+
+
+# --------------------------------------------------------------------------------------------
+# one run of the paper's protocol (what `hyst simulate` does)
+# --------------------------------------------------------------------------------------------
+MOTIONS = ("sweep", "periodic", "nonperiodic")
+"""Motions of the paper's protocol that :func:`simulate_motion` generates itself."""
+
+
+def run_seed(seed: int, trial: int) -> int:
+    """The noise seed of trial ``trial`` of an experiment seeded ``seed`` (trials differ)."""
+    return int(np.random.SeedSequence([int(seed), int(trial)]).generate_state(1)[0])
+
+
+def simulate_motion(catheter: VirtualCatheter, shape: Shape = Shape(), motion: str = "periodic", *,
+                    knobs: Sequence[int] | None = None, commands: Run | None = None,
+                    controller: str | None = None, effects: Sequence[Effect | EffectSpec] | None = None,
+                    seed: int = 0, trial: int = 1, rotation: float = 0.0, noise: bool = True) -> Run:
+    """One run of the virtual catheter under a shape, a motion and a controller.
+
+    Parameters
+    ----------
+    catheter : VirtualCatheter
+    shape : Shape
+    motion : str
+        ``sweep`` (the identification sweep, +-40 deg at 40 deg/s, 2 cycles, 1 kHz),
+        ``periodic`` (60 deg, 0.04 Hz, 2 cycles, 100 Hz) or ``nonperiodic`` (two sines of 30 deg,
+        100 s, 100 Hz; knob 2 runs twice as fast, the paper's 2-DoF case). Ignored with
+        ``commands``.
+    knobs : sequence of int, optional
+        Knobs to drive; default knob 1, both for ``nonperiodic``; with ``commands``, its knobs.
+    commands : Run, optional
+        Knob commands ``q<k>`` (and references ``r<k>``) to play instead of a generated motion,
+        e.g. the output of ``hyst compensate``; its ``controller``, ``motion`` and ``offset<k>``
+        metadata are kept.
+    controller : str, optional
+        Controller name to record; without ``commands`` only ``none`` (q = r) is possible.
+    effects : sequence, optional
+        Unmodelled effects; None: the catheter's defaults.
+    seed, trial : int
+        The noise seed is derived from both (:func:`run_seed`), so trials differ.
+    rotation : float
+        Bulk rotation of the body (deg).
+    noise : bool
+        Sensor noise and the 20 Hz filter.
+
+    Returns
+    -------
+    Run
+        As :func:`simulate`, with metadata catheter, controller, shape, motion, trial, seed,
+        effects and true offsets.
+
+    Raises
+    ------
+    DataError
+        Unknown motion, a knob the commands lack, a controller other than ``none`` without
+        commands.
+    """
+    extra: dict[str, object] = {}
+    if commands is not None:
+        avail = commands.knobs("q")
+        if not avail:
+            raise DataError(f"{commands.source or 'commands'}: no knob command column (q1 or q2)")
+        use = list(avail) if knobs is None else [int(k) for k in knobs]
+        for k in use:
+            commands.require(f"q{k}")
+        t = commands.t
+        q = {k: commands[f"q{k}"] for k in use}
+        r = {k: commands[f"r{k}"] for k in use if f"r{k}" in commands}
+        ctrl = controller or commands.meta.get("controller") or "unknown"
+        mot = commands.meta.get("motion") or "commands"
+        for k in use:
+            if f"offset{k}" in commands.meta:
+                extra[f"offset{k}"] = commands.meta[f"offset{k}"]
+    else:
+        if motion not in MOTIONS:
+            raise DataError(f"unknown motion {motion!r} (known: {', '.join(MOTIONS)}, or give --commands)")
+        if controller not in (None, "none"):
+            raise DataError(f"controller {controller!r} needs the commands it produced (--commands); "
+                            "a generated motion runs with controller none")
+        use = [int(k) for k in (knobs or ((1, 2) if motion == "nonperiodic" else (1,)))]
+        ctrl, mot = "none", motion
+        q, r = {}, {}
+        for k in use:
+            if motion == "sweep":
+                t, q[k] = sweep()
+            elif motion == "periodic":
+                t, r[k] = periodic()
+            else:
+                t, r[k] = nonperiodic(speed=float(k) if len(use) > 1 else 1.0)
+            if motion != "sweep":
+                q[k] = r[k]
+    for k in use:
+        if k not in catheter.knobs:
+            raise DataError(f"virtual catheter {catheter.name} has no knob {k}")
+    meta = {"controller": ctrl, "motion": mot, "trial": str(int(trial)), **extra}
+    run = simulate(catheter, t, q, shape=shape, rotation=rotation, effects=effects,
+                   seed=run_seed(seed, trial), noise=noise, r=r or None, meta=meta)
+    return run.with_meta(seed=str(int(seed)), effects=run.meta.get("effects", "none"))

@@ -1,0 +1,315 @@
+"""The effects of DESIGN.md section 8: null settings reproduce the base model bit for bit, and each
+effect moves the output the documented way (issue 3, must-show 4)."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hystcli import effects as E
+from hystcli import twin
+from hystcli.errors import DataError, ModelError
+from hystcli.io import Run
+from hystcli.model import EffectSpec, KnobModel, Model, Shape
+
+CAT = twin.get_catheter("ice-a")
+K1 = CAT.knobs[1]  # d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2
+
+
+def _triangle(amp: float, speed: float, cycles: int = 2, fs: float = 1000.0):
+    """Constant-speed triangle 0 -> +amp -> -amp -> ... (deg), so lags settle to tau*speed."""
+    period = 4 * amp / speed
+    t = np.arange(int(round(cycles * period * fs)) + 1) / fs
+    ph = (t / period) % 1.0
+    q = amp * np.where(ph < 0.25, 4 * ph, np.where(ph < 0.75, 2 - 4 * ph, 4 * ph - 4))
+    return t, q
+
+
+def _crossing(q, y, level, rising, last_cycle_from):
+    """Knob angle where y crosses ``level`` going up (rising) or down, on the last cycle."""
+    dq = np.gradient(q)
+    idx = np.arange(len(q))
+    sel = (idx >= last_cycle_from) & ((dq > 0) if rising else (dq < 0))
+    s = np.flatnonzero(sel[1:] & sel[:-1] & ((y[1:] - level) * (y[:-1] - level) <= 0) & (y[1:] != y[:-1]))
+    assert s.size, "no crossing"
+    i = s[0]
+    return q[i] + (level - y[i]) * (q[i + 1] - q[i]) / (y[i + 1] - y[i])
+
+
+def _loop_width(t, q, y, level=0.0):
+    half = len(q) // 2
+    return _crossing(q, y, level, True, half) - _crossing(q, y, level, False, half)
+
+
+def _sim(effects, q, t, shape=Shape(), **kw):
+    return twin.simulate(CAT, t, q, shape=shape, effects=effects, noise=False, **kw)
+
+
+# --------------------------------------------------------------------------------------------
+# registry and parsing
+# --------------------------------------------------------------------------------------------
+def test_registry_covers_design_section_8():
+    assert set(E.EFFECTS) == {"friction", "rate", "coupling", "deadzone", "creep", "latency",
+                              "saturation", "contact"}
+    for et in E.EFFECTS.values():
+        assert 1 <= len(et.params) <= 2
+        assert et.switch in et.params and et.stage in E.STAGES
+        for p in et.params:
+            lo, hi = et.bounds[p]
+            assert lo < hi and lo <= et.typical[p] <= hi
+            assert et.domain[p][0] <= lo and hi <= et.domain[p][1]
+        assert E.make_effect(et.name, **et.null_params()).is_null
+        assert not E.make_effect(et.name).is_null
+
+
+@pytest.mark.parametrize("text, message", [
+    ("stiction", "unknown effect"),
+    ("friction:nu=0.3", "unknown parameter 'nu'"),
+    ("friction:mu=abc", "must be a number"),
+    ("friction:mu=nan", "must be finite"),
+    ("friction:mu=-0.1", "outside its valid range"),
+    ("creep:fraction=1.5", "outside its valid range"),
+    ("latency:delay", "not param=value"),
+    ("latency:delay=inf", "must be finite"),
+])
+def test_bad_effects_raise_model_error_naming_the_problem(text, message):
+    with pytest.raises(ModelError, match=message):
+        E.parse_effect(text)
+
+
+def test_same_effect_twice_is_refused():
+    with pytest.raises(ModelError, match="given twice"):
+        E.as_effects([E.make_effect("rate"), EffectSpec("rate", {"tau": 0.1})])
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(sorted(E.EFFECTS)), st.data())
+def test_format_and_parse_round_trip(name, data):
+    et = E.EFFECTS[name]
+    params = {p: data.draw(st.floats(*et.bounds[p], allow_nan=False)) for p in et.params}
+    eff = E.make_effect(name, **params)
+    back = E.parse_effects(E.format_effects([eff, E.make_effect("latency" if name != "latency" else "rate")]))
+    assert back[0].name == name
+    for p in et.params:
+        assert back[0][p] == pytest.approx(params[p], rel=1e-5, abs=1e-9)  # %g keeps 6 digits
+    assert E.parse_effect(f"{name}:" + ",".join(f"{p}={v!r}" for p, v in params.items())).params == eff.params
+
+
+# --------------------------------------------------------------------------------------------
+# null settings: bit for bit the base model
+# --------------------------------------------------------------------------------------------
+T_SW, Q_SW = twin.sweep(fs=200.0)
+Q2_SW = 25.0 * np.sin(0.7 * T_SW + 0.3)
+BENT = Shape.parse("alpha=90,theta=30;alpha=40,theta=200")
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.sampled_from(sorted(E.EFFECTS)), st.data())
+def test_null_setting_reproduces_the_base_twin_bit_for_bit(name, data):
+    et = E.EFFECTS[name]
+    params = {p: data.draw(st.floats(*et.bounds[p], allow_nan=False)) for p in et.params}
+    params[et.switch] = et.null
+    eff = E.make_effect(name, **params)
+    base = _sim((), {1: Q_SW, 2: Q2_SW}, T_SW, BENT)
+    null = _sim((eff,), {1: Q_SW, 2: Q2_SW}, T_SW, BENT)
+    offs = CAT.true_offsets(BENT)
+    for k in (1, 2):
+        assert np.array_equal(null[f"y{k}"], base[f"y{k}"])
+        assert np.array_equal(null[f"c{k}"], base[f"c{k}"])
+        # ... and the base twin is the model of DESIGN.md section 3 itself
+        assert np.array_equal(base[f"y{k}"], CAT.knobs[k].with_offset(offs[k]).forward(null[f"q{k}"]))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.sampled_from(sorted(E.EFFECTS)), unique=True, max_size=4),
+       st.floats(-10, 10), st.sampled_from(["straight", "alpha=90,theta=0", "alpha=45,theta=90"]))
+def test_null_effects_in_predict_equal_knob_forward_bit_for_bit(names, y0, shape):
+    # no geometry: the knobs' own offsets apply whatever the shape (DESIGN.md section 6)
+    model = Model({1: K1.with_offset(3.0), 2: CAT.knobs[2].with_offset(-2.0)})
+    run = Run({"t": T_SW, "q1": Q_SW, "q2": Q2_SW, "y1": np.full_like(T_SW, y0)}, {"shape": shape})
+    null = [E.make_effect(n, **E.EFFECTS[n].null_params()) for n in names]
+    for effs in (None, null):
+        m = model if effs is None else Model(model.knobs, effects=tuple(e.spec() for e in null))
+        ys = E.predict(m, run)
+        assert np.array_equal(ys[1], model.knob(1).forward(Q_SW, y0))
+        assert np.array_equal(ys[2], model.knob(2).forward(Q2_SW, 0.0))
+
+
+def test_predict_uses_run_offsets_and_needs_commands():
+    model = CAT.true_model()
+    run = Run({"t": T_SW, "q1": Q_SW}, {"offset1": "7.5"})
+    assert np.array_equal(E.predict(model, run)[1], model.knob(1).with_offset(7.5).forward(Q_SW))
+    with pytest.raises(DataError, match="no command column"):
+        E.predict(model, Run({"t": T_SW, "y1": Q_SW}))
+
+
+@pytest.mark.parametrize("name", sorted(E.EFFECTS))
+def test_predict_with_the_true_effect_reproduces_the_noise_free_twin(name):
+    # the diagnosis and the twin share one effect code: the true model + effect predicts the twin
+    eff = E.make_effect(name, **({"wall": 10.0} if name == "contact" else {}))
+    run = _sim((eff,), {1: Q_SW, 2: Q2_SW}, T_SW, BENT)
+    model = Model(CAT.knobs, CAT.geometry, effects=(eff.spec(),))
+    ys = E.predict(model, run)
+    for k in (1, 2):
+        assert np.array_equal(ys[k], run[f"y{k}"])
+
+
+# --------------------------------------------------------------------------------------------
+# switched on: the documented direction
+# --------------------------------------------------------------------------------------------
+def test_friction_widens_the_loop_as_curvature_grows():
+    t, q = _triangle(60.0, 40.0)
+    widths = []
+    for alpha in (0.0, 45.0, 90.0):
+        shape = Shape.parse(f"alpha={alpha},theta=90")  # theta=90: no shift of knob 1
+        run = _sim((E.make_effect("friction", mu=0.3),), {1: q}, t, shape)
+        widths.append(_loop_width(t, q, run["y1"]))
+        # by hand (DESIGN.md section 3, y = 0 between h_pos and h_neg): ascending at
+        # d_pos + (0 - h_pos)/omega', descending at d_neg + (0 - h_neg)/omega', omega' = omega/g
+        g = math.exp(0.3 * math.radians(alpha))
+        assert widths[-1] == pytest.approx(9.1 + 8.7 + (4.2 + 4.0) * g / 1.45, abs=0.05)
+    assert widths[0] < widths[1] < widths[2]
+    # the slope falls by g: the tip's range shrinks
+    straight = _sim((), {1: q}, t)["y1"]
+    bent = _sim((E.make_effect("friction", mu=0.3),), {1: q}, t, Shape.parse("alpha=90,theta=90"))["y1"]
+    assert np.ptp(bent) < np.ptp(straight)
+
+
+def test_deadzone_widens_the_dead_zone_with_curvature():
+    t, q = _triangle(60.0, 40.0)
+    half = len(q) // 2
+    up = (np.gradient(q) > 0) & (np.arange(len(q)) >= half)
+
+    def dead_zone_length(y):
+        # the ascending flat part L3 at height h_pos = -4
+        flat = up & (np.abs(y - K1.h_pos) < 1e-12)
+        return q[flat].max() - q[flat].min()
+
+    base = dead_zone_length(_sim((), {1: q}, t)["y1"])
+    # by hand: d_pos - dhat_pos = 9.1 - ((-4 - 4.2)/1.45 - 8.7 + 5.9)
+    assert base == pytest.approx(9.1 - (-8.2 / 1.45 - 8.7 + 5.9), abs=0.05)
+    wide = dead_zone_length(_sim((E.make_effect("deadzone", width=3.0),), {1: q}, t,
+                                 Shape.parse("alpha=90,theta=90"))["y1"])
+    assert wide - base == pytest.approx(3.0 * math.pi / 2, abs=0.08)
+    narrow = dead_zone_length(_sim((E.make_effect("deadzone", width=-2.0),), {1: q}, t,
+                                   Shape.parse("alpha=90,theta=90"))["y1"])
+    assert narrow - base == pytest.approx(-2.0 * math.pi / 2, abs=0.08)
+
+
+def _rising_edge(q, y, h):
+    # knob angle where the ascending tip leaves the dead-zone height h (the shifted d_pos)
+    i = np.flatnonzero((np.gradient(q) > 0) & (y > h + 1e-9) & (np.abs(q) < 30))
+    return q[i[0]]
+
+
+@pytest.mark.parametrize("q2_held", [-30.0, 20.0])
+def test_coupling_shifts_knob_1_dead_zone_when_knob_2_moves(q2_held):
+    t = np.arange(4001) / 200.0
+    q1 = -30.0 + 3.0 * t  # one slow ascending pass through the dead zone
+    eff = (E.make_effect("coupling", gain=0.15),)
+    still = _sim(eff, {1: q1, 2: np.zeros_like(t)}, t)
+    moved = _sim(eff, {1: q1, 2: np.full_like(t, q2_held)}, t)
+    base = _sim((), {1: q1, 2: np.full_like(t, q2_held)}, t)
+    e0, e1 = _rising_edge(q1, still["y1"], K1.h_pos), _rising_edge(q1, moved["y1"], K1.h_pos)
+    assert e0 == pytest.approx(9.1, abs=0.02)  # d_pos, straight shaft
+    assert e1 - e0 == pytest.approx(0.15 * q2_held, abs=0.03)
+    assert np.array_equal(base["y1"], still["y1"])  # without coupling knob 2 does not matter
+    # the current sees the same shifted edge (its slope jumps there)
+    c = moved["c1"]
+    taut = np.flatnonzero(c > c[np.abs(q1 - (e1 - 3)).argmin()] + 1.0)
+    # 1 mA above the flat level is 1 / (k_load (1 + mu)) = 1/5 deg past the edge
+    assert q1[taut[0]] == pytest.approx(e1 + 0.2, abs=0.03)
+
+
+def test_rate_widens_the_loop_by_twice_tau_times_speed():
+    tau = 0.1
+    for speed in (10.0, 40.0):
+        t, q = _triangle(60.0, speed)
+        base = _loop_width(t, q, _sim((), {1: q}, t)["y1"])
+        slow = _loop_width(t, q, _sim((E.make_effect("rate", tau=tau),), {1: q}, t)["y1"])
+        # a first-order lag trails a ramp of speed v by tau*v once settled (e^-7 of the
+        # transient left 0.7 s after a reversal), on both branches
+        assert slow - base == pytest.approx(2 * tau * speed, abs=0.01)
+
+
+def test_creep_decays_with_its_time_constant():
+    fs, tau, frac = 100.0, 2.0, 0.25
+    t = np.arange(2001) / fs
+    q = np.where(t >= 1.0, 35.0, 0.0)  # a step of the knob at t = 1 s, then hold
+    base = _sim((), {1: q}, t)["y1"]
+    y = _sim((E.make_effect("creep", fraction=frac, tau=tau),), {1: q}, t)["y1"]
+    jump = base[-1] - base[0]
+    assert jump > 10  # the step bends the tip
+    i = np.flatnonzero(t >= 1.0)
+    # right after the step the tip has moved (1 - fraction) of the way (the sampled step is a
+    # ramp over one sample of 0.01 s: the slow part has moved by dt/(2 tau) of itself) ...
+    assert y[i[0]] - y[0] == pytest.approx((1 - frac) * jump, rel=1e-3)
+    # ... and the rest arrives as exp(-(t - 1)/tau)
+    gap = base[i] - y[i]
+    assert gap[0] == pytest.approx(frac * jump, rel=0.01 / (2 * tau) + 1e-4)
+    assert gap == pytest.approx(gap[0] * np.exp(-(t[i] - 1.0) / tau), rel=1e-9)
+    assert y[-1] < base[-1]
+
+
+@pytest.mark.parametrize("delay, samples", [(0.05, 5), (0.2, 20)])
+def test_latency_shifts_the_reported_tip_by_exactly_the_delay(delay, samples):
+    t, r = twin.periodic(fs=100.0)
+    base = _sim((), {1: r}, t)
+    late = _sim((E.make_effect("latency", delay=delay),), {1: r}, t)
+    assert np.allclose(late["y1"][samples:], base["y1"][:-samples], rtol=0, atol=1e-9)
+    assert np.all(late["y1"][:samples] == 0.0)  # before the run the tip sat straight
+    assert np.array_equal(late["c1"], base["c1"])  # the tracker is late, not the motor
+
+
+def test_latency_interpolates_between_samples():
+    t = np.arange(101) / 100.0
+    q = 40.0 * t  # ramp through the dead zone onto the loaded slope
+    base = _sim((), {1: q}, t)["y1"]
+    late = _sim((E.make_effect("latency", delay=0.015),), {1: q}, t)["y1"]
+    assert late[50] == pytest.approx(0.5 * (base[48] + base[49]), abs=1e-12)
+
+
+def test_saturation_stiffens_near_the_largest_bend():
+    t, r = twin.periodic(fs=100.0)
+    base = _sim((), {1: r}, t)["y1"]
+    sat = _sim((E.make_effect("saturation", limit=50.0),), {1: r}, t)["y1"]
+    assert np.max(np.abs(sat)) < 50.0
+    assert np.max(sat) == pytest.approx(50.0 * math.tanh(np.max(base) / 50.0), rel=1e-12)
+    small = np.abs(base) < 2
+    assert np.allclose(sat[small], base[small], atol=2e-3)  # near straight, barely changed
+
+
+def test_contact_stops_the_tip_and_the_current_climbs_far_above_the_loaded_slope():
+    t = np.arange(3001) / 100.0
+    q = 2.0 * t  # 0 -> 60 deg, slowly
+    free = _sim((), {1: q}, t)
+    wall = _sim((E.make_effect("contact", wall=20.0, stiffness=60.0),), {1: q}, t)
+    y, c = wall["y1"], wall["c1"]
+    assert np.max(y) == 20.0 and np.max(free["y1"]) > 40.0
+    assert np.array_equal(y[free["y1"] <= 20.0], free["y1"][free["y1"] <= 20.0])
+
+    def slope(mask):
+        return np.polyfit(q[mask], c[mask], 1)[0]
+
+    loaded = slope((q > 15) & (q < 25))  # tendon taut, no wall: k_load (1 + mu) = 4 * 1.25
+    contact = slope(free["y1"] > 25)
+    assert loaded == pytest.approx(5.0, rel=0.02)
+    # stiffness = 60 mA per knob deg past the wall, on top of the loaded slope
+    assert contact == pytest.approx(5.0 + 60.0, rel=0.02)
+    assert contact > 5 * loaded
+
+
+def test_negative_wall_stops_negative_bending():
+    t = np.arange(3001) / 100.0
+    y = _sim((E.make_effect("contact", wall=-15.0),), {1: -2.0 * t}, t)["y1"]
+    assert np.min(y) == -15.0
+
+
+def test_friction_that_breaks_the_model_is_an_error_naming_it():
+    knob = KnobModel(d_pos=2.0, d_neg=-2.0, b_pos=1.5, b_neg=1.5, omega=1.0, h_pos=0.0, h_neg=0.0)
+    # g = exp(1 * pi) = 23.1: b_neg -> 34.7, dhat_pos = 0 - 2 + 34.7 > d_pos = 2
+    with pytest.raises(ModelError, match="friction.*dhat_pos <= d_pos"):
+        E.condition_knob(knob, (E.make_effect("friction", mu=1.0),), Shape.parse("alpha=180"))
