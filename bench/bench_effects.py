@@ -1,6 +1,6 @@
 """Speed of effects.predict (what the diagnosis calls thousands of times) and of the live twin.
 
-Run: python bench/effects_speed.py   (prints milliseconds per call)
+Run: python bench/bench_effects.py   (prints milliseconds per call)
 """
 from __future__ import annotations
 
