@@ -1,0 +1,416 @@
+"""The device side of the hyst line protocol, serving a live twin over a pseudo-terminal.
+
+Owns :class:`DeviceEmulator` (what a robot controller does with each received line: validate
+the checksum, never act on a corrupt or malformed frame, move the twin's knobs, answer), the
+fault injection that tests use (:class:`Fault`: stop replying, garble a reply, close the port,
+answer ``ERR``, a current spike, a late reply) and :class:`PtyServer` / :func:`serve`, which
+put that device behind a real pseudo-terminal (``os.openpty``) whose slave path any serial
+client opens like a USB serial port.
+
+The twin is anything with the interface of ``hystcli.twin.LiveTwin``: ``move(knob, q_target,
+speed_deg_s=...) -> (knob_angle, motor_current, tip_angle)``, ``state(knob)`` (same triple),
+``tip_available`` and the catheter it simulates. POSIX only (pseudo-terminals).
+"""
+from __future__ import annotations
+
+import errno
+import math
+import os
+import re
+import select
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any, Iterable, Sequence
+
+from .device import (MAX_FRAME, NO_SEQ, PROTOCOL_VERSION, DeviceInfo, Frame,
+                     FrameError, decode_frame, encode_frame, parse_knob, parse_number)
+from .errors import DataError
+
+FAULT_KINDS = ("silent", "garble", "close", "error", "spike", "delay")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """A fault the emulated device injects, triggered by the count of ``MOVE`` frames.
+
+    Attributes
+    ----------
+    kind : str
+        ``silent``: from the ``at``-th MOVE on, read frames but never answer (and do not move);
+        ``garble``: answer ``count`` MOVEs from the ``at``-th with one byte of the reply
+        corrupted (the knob did move: only the reply is damaged);
+        ``close``: close the pseudo-terminal when the ``at``-th MOVE arrives (an unplugged cable);
+        ``error``: answer ``count`` MOVEs with ``ERR value`` instead of moving (``value`` is the
+        code, ``E_MOTOR`` by default);
+        ``spike``: add ``value`` mA (default 5000) to the current of ``count`` replies (contact);
+        ``delay``: answer ``count`` MOVEs ``value`` seconds late (default 1.0).
+    at : int
+        1-based index of the MOVE frame that triggers it.
+    count : int
+        How many MOVEs it affects (``silent`` and ``close`` are for good).
+    value : str or None
+    """
+
+    kind: str
+    at: int = 1
+    count: int = 1
+    value: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.kind not in FAULT_KINDS:
+            raise DataError(f"unknown fault {self.kind!r} (known: {', '.join(FAULT_KINDS)})")
+        if self.at < 1 or self.count < 1:
+            raise DataError(f"fault {self.kind}: at and count must be >= 1")
+        if self.kind in ("spike", "delay") and self.value is not None:
+            try:
+                v = float(self.value)
+            except ValueError:
+                raise DataError(f"fault {self.kind}: value {self.value!r} is not a number") from None
+            if not math.isfinite(v) or (self.kind == "delay" and v < 0):
+                raise DataError(f"fault {self.kind}: value {self.value!r} out of range")
+        if self.kind == "error" and self.value is not None and not re.fullmatch(r"E_[A-Z0-9_]+", self.value):
+            raise DataError(f"fault error: code {self.value!r} must look like E_MOTOR")
+
+    def hits(self, n: int) -> bool:
+        """Whether the ``n``-th MOVE is affected."""
+        if self.kind in ("silent", "close"):
+            return n >= self.at
+        return self.at <= n < self.at + self.count
+
+    @classmethod
+    def parse(cls, text: str) -> "Fault":
+        """Parse ``KIND@N[xCOUNT][=VALUE]``, e.g. ``garble@5``, ``error@3=E_MOTOR``, ``spike@4x2=3000``."""
+        m = re.fullmatch(r"\s*([a-z]+)@([0-9]+)(?:x([0-9]+))?(?:=(\S+))?\s*", text)
+        if not m:
+            raise DataError(f"bad fault {text!r}: expected KIND@N[xCOUNT][=VALUE], "
+                            f"KIND one of {', '.join(FAULT_KINDS)}")
+        return cls(m.group(1), int(m.group(2)), int(m.group(3) or 1), m.group(4))
+
+
+class _Closed(Exception):
+    """Raised inside the emulator when a ``close`` fault fires."""
+
+
+class DeviceEmulator:
+    """A robot controller in software: the device side of the protocol over a twin.
+
+    Parameters
+    ----------
+    twin : LiveTwin-like
+        The virtual catheter it drives.
+    name : str
+        Device name sent in the handshake.
+    travel_limit : float
+        Largest absolute knob angle (deg) it accepts; beyond, ``ERR E_RANGE``.
+    default_speed : float
+        Knob speed (deg/s) when a MOVE gives none.
+    faults : iterable of Fault
+        Faults to inject.
+
+    Attributes
+    ----------
+    moves, stops, bad_frames, errors_sent : int
+        Counters a test can read: MOVE frames received, STOPs executed, frames refused as
+        corrupt or malformed, ERR replies sent.
+    """
+
+    def __init__(self, twin: Any, *, name: str = "hyst-sim", travel_limit: float = 170.0,
+                 default_speed: float = 20.0, faults: Iterable[Fault] = ()) -> None:
+        self.twin = twin
+        catheter = getattr(twin, "catheter", None)
+        knobs = tuple(int(k) for k in getattr(twin, "knobs", (1, 2)))
+        self.info = DeviceInfo(PROTOCOL_VERSION, name,
+                               str(getattr(catheter, "name", catheter or "unknown")), knobs,
+                               bool(getattr(twin, "tip_available", True)), {"fw": "hystcli-emulator"})
+        self.travel_limit = float(travel_limit)
+        self.default_speed = float(default_speed)
+        self.faults: list[Fault] = list(faults)
+        self.moves = 0
+        self.stops = 0
+        self.bad_frames = 0
+        self.errors_sent = 0
+        self.silent = False
+        self._lock = threading.Lock()
+
+    def inject(self, fault: Fault) -> None:
+        """Add a fault (thread-safe)."""
+        with self._lock:
+            self.faults.append(fault)
+
+    # ---- one received line -> replies ------------------------------------------------------
+    def handle_line(self, line: bytes) -> list[tuple[bytes, float]]:
+        """Process one received line; return the replies as ``(bytes, delay_s)`` pairs.
+
+        Raises ``_Closed`` when a ``close`` fault fires (the server closes the port).
+        """
+        with self._lock:
+            try:
+                return self._handle(line)
+            except _Closed:
+                raise
+            except Exception as exc:  # noqa: BLE001 - a controller answers, it does not crash
+                try:
+                    seq = decode_frame(line).seq
+                except FrameError:
+                    seq = NO_SEQ
+                return [(self._err(seq, "E_MOTOR", f"internal fault: {exc}"), 0.0)]
+
+    def _handle(self, line: bytes) -> list[tuple[bytes, float]]:
+        if not line.strip():
+            return []  # empty lines end a partial frame of the host; not a command
+        try:
+            frame = decode_frame(line)
+        except FrameError as exc:
+            self.bad_frames += 1
+            if self.silent:
+                return []
+            code = "E_CRC" if "checksum" in str(exc) else "E_FRAME"
+            return [(self._err(NO_SEQ, code, "frame refused, nothing done"), 0.0)]
+        if self.silent:
+            return []
+        if frame.verb == "MOVE":
+            self.moves += 1
+            return self._move(frame)
+        try:
+            if frame.verb == "HELLO":
+                return [(encode_frame(frame.seq, "HELLO", *self.info.to_fields()), 0.0)]
+            if frame.verb == "STOP":
+                self.stops += 1
+                stop = getattr(self.twin, "stop", None)
+                if callable(stop):
+                    stop()
+                return [(encode_frame(frame.seq, "STOPPED"), 0.0)]
+            if frame.verb == "STATE":
+                if len(frame.args) != 1:
+                    return [(self._err(frame.seq, "E_ARG", "STATE takes one knob"), 0.0)]
+                knob = self._knob(frame.args[0])
+                if knob is None:
+                    return [(self._err(frame.seq, "E_KNOB", f"no knob {frame.args[0]}"), 0.0)]
+                return [(self._pos(frame.seq, knob, self.twin.state(knob)), 0.0)]
+        except FrameError as exc:
+            return [(self._err(frame.seq, "E_ARG", str(exc)), 0.0)]
+        return [(self._err(frame.seq, "E_CMD", f"unknown command {frame.verb}"), 0.0)]
+
+    def _move(self, frame: Frame) -> list[tuple[bytes, float]]:
+        n = self.moves
+        active = [f for f in self.faults if f.hits(n)]
+        kinds = {f.kind: f for f in active}
+        if "close" in kinds:
+            raise _Closed()
+        if "silent" in kinds:
+            self.silent = True
+            return []
+        if "error" in kinds:
+            return [(self._err(frame.seq, kinds["error"].value or "E_MOTOR",
+                               "injected fault: motor driver error"), 0.0)]
+        if len(frame.args) not in (2, 3):
+            return [(self._err(frame.seq, "E_ARG", "MOVE takes knob angle [speed]"), 0.0)]
+        knob = self._knob(frame.args[0])
+        if knob is None:
+            return [(self._err(frame.seq, "E_KNOB", f"no knob {frame.args[0]}"), 0.0)]
+        try:
+            angle = parse_number(frame.args[1], "angle")
+            speed = parse_number(frame.args[2], "speed") if len(frame.args) == 3 else self.default_speed
+        except FrameError as exc:
+            return [(self._err(frame.seq, "E_ARG", str(exc)), 0.0)]
+        if abs(angle) > self.travel_limit:
+            return [(self._err(frame.seq, "E_RANGE",
+                               f"{angle:g} deg outside +-{self.travel_limit:g}"), 0.0)]
+        if not speed > 0:
+            return [(self._err(frame.seq, "E_ARG", "speed must be positive"), 0.0)]
+        q, c, y = self.twin.move(knob, angle, speed_deg_s=speed)
+        if "spike" in kinds:
+            c = float(c) + float(kinds["spike"].value or 5000.0)
+        reply = self._pos(frame.seq, knob, (q, c, y))
+        if "garble" in kinds:
+            reply = garble(reply)
+        delay = float(kinds["delay"].value or 1.0) if "delay" in kinds else 0.0
+        return [(reply, delay)]
+
+    def _knob(self, text: str) -> int | None:
+        try:
+            k = parse_knob(text)
+        except FrameError:
+            return None
+        return k if k in self.info.knobs else None
+
+    def _pos(self, seq: int | None, knob: int, st: Sequence[Any]) -> bytes:
+        q, c, y = st
+        tip = "-" if (y is None or not self.info.tracker or not math.isfinite(y)) else float(y)
+        return encode_frame(seq, "POS", knob, float(q), float(c), tip)
+
+    def _err(self, seq: int | None, code: str, message: str) -> bytes:
+        self.errors_sent += 1
+        words = [w for w in re.sub(r"[^\x21-\x7e ]|\*", "?", message).split(" ") if w]
+        frame = encode_frame(seq, "ERR", code, *words[:12])
+        return frame if len(frame) <= MAX_FRAME else encode_frame(seq, "ERR", code)
+
+
+def garble(frame: bytes) -> bytes:
+    """The frame with one byte of its body changed (its checksum no longer matches)."""
+    body = bytearray(frame)
+    i = max(0, min(len(body) - 5, len(body) // 2))
+    body[i] = ord("#") if body[i] != ord("#") else ord("%")
+    return bytes(body)
+
+
+class PtyServer:
+    """Serves a :class:`DeviceEmulator` on a pseudo-terminal, in a thread or in the foreground.
+
+    Parameters
+    ----------
+    emulator : DeviceEmulator
+    latency : float
+        Seconds the device takes to answer each frame (a realistic controller: 1-5 ms).
+
+    Attributes
+    ----------
+    path : str
+        The slave device path (``/dev/pts/N``) a client opens as a serial port.
+    """
+
+    def __init__(self, emulator: DeviceEmulator, latency: float = 0.0) -> None:
+        import tty
+
+        if not latency >= 0:
+            raise DataError("latency must be >= 0")
+        self.emulator = emulator
+        self.latency = float(latency)
+        self._master, self._slave = os.openpty()
+        # raw mode: no echo, no line editing, bytes pass untouched. The server keeps the slave
+        # open so that clients may come and go without the master seeing a hang-up.
+        tty.setraw(self._slave)
+        os.set_blocking(self._master, False)
+        self.path = os.ttyname(self._slave)
+        self._wake_r, self._wake_w = os.pipe()
+        self._thread: threading.Thread | None = None
+        self._stopping = threading.Event()
+        self.closed = False
+
+    # ---- life cycle ------------------------------------------------------------------------
+    def start(self) -> "PtyServer":
+        """Serve in a daemon thread; returns self."""
+        self._thread = threading.Thread(target=self.serve_forever, name="hyst-pty-device", daemon=True)
+        self._thread.start()
+        return self
+
+    def __enter__(self) -> "PtyServer":
+        return self.start() if self._thread is None else self
+
+    def __exit__(self, *exc: object) -> None:
+        self.shutdown()
+
+    def shutdown(self) -> None:
+        """Stop serving and close the pseudo-terminal (idempotent)."""
+        self._stopping.set()
+        try:
+            os.write(self._wake_w, b"x")
+        except OSError:
+            pass
+        if self._thread is not None and self._thread is not threading.current_thread():
+            self._thread.join(timeout=5)
+        self._close_fds()
+        for fd in (self._wake_r, self._wake_w):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+        self._wake_r = self._wake_w = -1
+
+    def close_pty(self) -> None:
+        """Close the pseudo-terminal now: the client sees a disconnected device."""
+        self._close_fds()
+
+    def _close_fds(self) -> None:
+        if self.closed:
+            return
+        self.closed = True
+        for fd in (self._master, self._slave):
+            try:
+                os.close(fd)
+            except OSError:
+                pass
+
+    # ---- the loop --------------------------------------------------------------------------
+    def serve_forever(self) -> None:
+        """Answer frames until :meth:`shutdown` (or a ``close`` fault)."""
+        buf = bytearray()
+        overflow = False
+        while not self._stopping.is_set() and not self.closed:
+            try:
+                ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.5)
+            except (OSError, ValueError):
+                break
+            if self._wake_r in ready or self.closed:
+                break
+            if not ready:
+                continue
+            try:
+                data = os.read(self._master, 4096)
+            except BlockingIOError:
+                continue
+            except OSError:
+                break
+            if not data:
+                continue
+            buf.extend(data)
+            while True:
+                nl = buf.find(b"\n")
+                if nl < 0:
+                    if len(buf) > MAX_FRAME:
+                        # an endless line: drop it, answer once when its newline comes
+                        buf.clear()
+                        overflow = True
+                    break
+                line = bytes(buf[:nl + 1])
+                del buf[:nl + 1]
+                if overflow:
+                    overflow = False
+                    line = b"x" * (MAX_FRAME + 1)  # a line known too long: refused as E_FRAME
+                try:
+                    replies = self.emulator.handle_line(line)
+                except _Closed:
+                    self._close_fds()
+                    return
+                for reply, delay in replies:
+                    if self.latency + delay > 0:
+                        time.sleep(self.latency + delay)
+                    self._send(reply)
+
+    def _send(self, data: bytes) -> None:
+        try:
+            os.write(self._master, data)
+        except BlockingIOError:
+            pass  # the client does not read: a real device would drop the reply too
+        except OSError as exc:
+            if exc.errno not in (errno.EIO, errno.EBADF):
+                raise
+
+
+def serve(twin: Any, *, latency: float = 0.0, faults: Iterable[Fault] = (),
+          name: str = "hyst-sim", travel_limit: float = 170.0, background: bool = True) -> PtyServer:
+    """Serve ``twin`` as a robot on a new pseudo-terminal.
+
+    Parameters
+    ----------
+    twin : LiveTwin-like
+    latency : float
+        Per-frame answer latency (s).
+    faults : iterable of Fault
+        Faults to inject (tests).
+    name : str
+        Device name in the handshake.
+    travel_limit : float
+        Largest absolute knob angle accepted (deg).
+    background : bool
+        Start a daemon thread (True) or return the server for :meth:`PtyServer.serve_forever`.
+
+    Returns
+    -------
+    PtyServer
+        ``server.path`` is the device to connect to; ``server.shutdown()`` ends it.
+    """
+    emu = DeviceEmulator(twin, name=name, travel_limit=travel_limit, faults=faults)
+    server = PtyServer(emu, latency)
+    return server.start() if background else server

@@ -1,0 +1,216 @@
+"""`hyst sim-robot` and `hyst play` end to end over a real pseudo-terminal.
+
+The robot is `hyst sim-robot` in a subprocess (the most honest setup) or the same emulator in a
+thread when a test needs to look inside it (its stop counter); the host side is the CLI through
+typer's CliRunner. Nothing is mocked above the transport.
+"""
+from __future__ import annotations
+
+import json
+import select
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from hystcli import compensation
+from hystcli.cli import app
+from hystcli.device import Device, play_trajectory
+from hystcli.emulator import Fault, serve
+from hystcli.io import Run, read_run, write_run
+from hystcli.model import Shape
+from hystcli.twin import LiveTwin, get_catheter, periodic, simulate
+
+CAT = get_catheter("ice-a")
+SHAPE = "alpha=45,theta=0"
+runner = CliRunner()
+
+
+def _start_sim_robot(*args: str) -> tuple[subprocess.Popen, str]:
+    proc = subprocess.Popen([sys.executable, "-m", "hystcli", "sim-robot", "--quiet", *args],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    ready, _, _ = select.select([proc.stdout], [], [], 60)
+    if not ready:
+        proc.kill()
+        raise AssertionError("sim-robot printed no device path within 60 s")
+    path = proc.stdout.readline().strip()
+    assert path.startswith("/dev/"), (path, proc.stderr.read() if proc.poll() is not None else "")
+    return proc, path
+
+
+def _stop(proc: subprocess.Popen) -> int:
+    if proc.poll() is None:
+        proc.send_signal(signal.SIGTERM)
+    try:
+        return proc.wait(timeout=20)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+
+
+@pytest.fixture(scope="module")
+def commands(tmp_path_factory) -> Path:
+    """Knob commands from `compensate` logic: the inverse of the true shifted model on a
+    periodic reference (60 deg amplitude as in the paper, sped up to 0.5 Hz for a short run)."""
+    folder = tmp_path_factory.mktemp("traj")
+    t, r = periodic(amplitude=60.0, freq=0.5, cycles=1.0, fs=50.0)
+    model = CAT.true_model(Shape.parse(SHAPE))
+    traj = Run({"t": t, "r1": r}, {"catheter": "ice-a", "shape": SHAPE, "motion": "periodic",
+                                    "trial": "1"})
+    cmds = compensation.compensate(model, traj).run
+    path = folder / "cmds.csv"
+    write_run(path, cmds)
+    return path
+
+
+# ------------------------------------------------------------------------------------------
+# sim-robot (subprocess) + play + evaluate
+# ------------------------------------------------------------------------------------------
+def test_play_against_sim_robot_matches_the_offline_twin(commands, tmp_path):
+    proc, path = _start_sim_robot("--catheter", "ice-a", "--shape", SHAPE, "--seed", "4",
+                                  "--latency-ms", "0.2")
+    try:
+        out = tmp_path / "run.csv"
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
+                                  "--quiet"])
+        assert res.exit_code == 0, res.output
+    finally:
+        assert _stop(proc) == 0  # SIGTERM ends it cleanly
+    run = read_run(out)
+    cmds = read_run(commands)
+    # metadata: the trajectory's kept, the device's added
+    assert run.meta["controller"] == cmds.meta["controller"]
+    assert run.meta["offset1"] == cmds.meta["offset1"]
+    assert run.meta["device_catheter"] == "ice-a" and run.meta["device_tracker"] == "yes"
+    np.testing.assert_allclose(run["q1"], cmds["q1"])
+    np.testing.assert_allclose(run["r1"], cmds["r1"])
+    # the tip measured through the link against the offline twin, noise-free, on the same
+    # commands: only the tracker's noise (0.3 deg rms, twin.CATHETERS ice-a) separates them
+    offline = simulate(CAT, cmds.t, {1: cmds["q1"]}, shape=Shape.parse(SHAPE), effects=(), noise=False)
+    err = run["y1"] - offline["y1"]
+    assert np.sqrt(np.mean(err ** 2)) < 2 * CAT.em_noise_deg
+    assert abs(np.mean(err)) < 0.15
+    # compensation on the true model tracks the reference: the tip follows r within the noise
+    assert np.sqrt(np.mean((run["y1"] - run["r1"]) ** 2)) < 2 * CAT.em_noise_deg
+
+    # play -> evaluate gives the figures of the offline simulation of the same commands
+    sim_path = tmp_path / "offline.csv"
+    write_run(sim_path, simulate(CAT, cmds.t, {1: cmds["q1"]}, shape=Shape.parse(SHAPE), effects=(),
+                                 r={1: cmds["r1"]}, meta=dict(cmds.meta), seed=4))
+    rmse = []
+    for p in (out, sim_path):
+        res = runner.invoke(app, ["evaluate", str(p), "--format", "json", "--per-run"])
+        assert res.exit_code == 0, res.output
+        rmse.append(json.loads(res.stdout)["runs"][0]["rmse"])
+    # both are the tracker noise (0.3 deg rms raw live, less after the offline 20 Hz filter)
+    assert abs(rmse[0] - rmse[1]) < 0.25 and rmse[0] < 2 * CAT.em_noise_deg
+
+
+def test_play_fault_from_sim_robot_subprocess_writes_nothing(commands, tmp_path):
+    proc, path = _start_sim_robot("--fault", "close@20")
+    try:
+        out = tmp_path / "run.csv"
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
+                                  "--timeout", "0.5"])
+    finally:
+        try:
+            code = proc.wait(timeout=20)  # its port closed, the robot process ends by itself
+        finally:
+            _stop(proc)
+    assert res.exit_code == 1
+    assert "Error:" in res.output and ("disconnected" in res.output or "no reply" in res.output)
+    assert "Traceback" not in res.output
+    assert not out.exists() and list(tmp_path.iterdir()) == []
+    assert code == 0
+
+
+def test_sim_robot_refuses_a_bad_fault_spec():
+    res = runner.invoke(app, ["sim-robot", "--fault", "boom@1"])
+    assert res.exit_code == 1 and "unknown fault 'boom'" in res.output
+
+
+# ------------------------------------------------------------------------------------------
+# play faults against an emulator in a thread (to see its stop counter)
+# ------------------------------------------------------------------------------------------
+@pytest.fixture
+def robot():
+    srv = serve(LiveTwin(CAT, seed=1))
+    yield srv
+    srv.shutdown()
+
+
+@pytest.mark.parametrize("fault, words", [
+    (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR"),
+    (Fault("garble", at=10), "checksum mismatch"),
+    (Fault("silent", at=10), "no reply"),
+])
+def test_play_faults_stop_the_motors_and_write_nothing(robot, commands, tmp_path, fault, words):
+    robot.emulator.inject(fault)
+    out = tmp_path / "run.csv"
+    res = runner.invoke(app, ["play", str(commands), "--port", robot.path, "-o", str(out), "--fast",
+                              "--timeout", "0.3"])
+    assert res.exit_code == 1
+    last = res.output.strip().splitlines()[-1]
+    assert last.startswith("Error:") and words in last
+    assert not out.exists()
+    if fault.kind != "silent":
+        assert robot.emulator.stops >= 1  # the host stopped the motors
+
+
+def test_play_interrupted_stops_the_motors(robot, commands):
+    def interrupt(i, n):
+        if i == 5:
+            raise KeyboardInterrupt
+
+    with Device(robot.path, timeout=0.5) as dev:
+        with pytest.raises(KeyboardInterrupt):
+            play_trajectory(dev, read_run(commands), paced=False, progress=interrupt)
+        assert robot.emulator.stops == 1
+
+
+def test_play_paced_follows_the_file_timing(robot):
+    t = np.arange(11) * 0.03  # 0.3 s
+    traj = Run({"t": t, "q1": np.linspace(0, 3, 11)})
+    with Device(robot.path, timeout=0.5) as dev:
+        t0 = time.monotonic()
+        run = play_trajectory(dev, traj, paced=True)
+        elapsed = time.monotonic() - t0
+    assert 0.3 <= elapsed < 2.0  # never ahead of the file; slack for a loaded machine
+    assert run.meta["play_timing"] == "paced" and float(run.meta["play_max_lag_s"]) < 0.5
+
+
+def test_play_refuses_a_knob_the_device_lacks(commands, tmp_path):
+    srv = serve(LiveTwin(CAT, knobs=(2,)))
+    try:
+        out = tmp_path / "run.csv"
+        res = runner.invoke(app, ["play", str(commands), "--port", srv.path, "-o", str(out)])
+        assert res.exit_code == 1 and "knob 1" in res.output and "drives knobs 2" in res.output
+        assert srv.emulator.moves == 0 and not out.exists()
+    finally:
+        srv.shutdown()
+
+
+def test_play_refuses_to_overwrite_its_input_before_connecting(commands):
+    before = commands.read_bytes()
+    res = runner.invoke(app, ["play", str(commands), "--port", "/nonexistent/tty", "-o", str(commands)])
+    assert res.exit_code == 1 and "refusing to overwrite an input" in res.output
+    assert commands.read_bytes() == before
+
+
+def test_play_bad_port_is_one_error_line(commands, tmp_path):
+    res = runner.invoke(app, ["play", str(commands), "--port", "/nonexistent/tty", "-o",
+                              str(tmp_path / "x.csv")])
+    assert res.exit_code == 1
+    assert res.output.strip().splitlines() == [res.output.strip()]
+    assert "cannot open port /nonexistent/tty" in res.output
+
+
+def test_help_has_examples():
+    for cmd in ("play", "sim-robot"):
+        res = runner.invoke(app, [cmd, "--help"])
+        assert res.exit_code == 0 and "Example" in res.output
