@@ -1,0 +1,326 @@
+"""Tests of hystcli.identify: recovery of known parameters (issue 2, Must-show 3), sweep checks,
+uncertainties, the levels stored for detect-shift, determinism and the figure.
+
+Synthetic sweeps come from the virtual catheter (hystcli.twin) with the paper's protocol: a
++-40 deg sine, 2 cycles, 40 deg/s peak, 1 kHz, EM noise 0.3 deg rms, current noise, 3rd-order
+Butterworth at 20 Hz (twin.simulate with noise=True). The true parameters are drawn at random
+(seeded) over many sets, so the tolerances are checked on many loops, not one.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from hystcli import twin
+from hystcli.errors import DataError, IdentificationError
+from hystcli.identify import check_sweep, find_reversals, identify, plot_identification
+from hystcli.io import Run
+from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
+
+N_SETS = 12
+
+
+def random_catheter(rng: np.random.Generator, name: str = "random") -> twin.VirtualCatheter:
+    """A virtual catheter with random valid parameters on both knobs.
+
+    d_pos in [5, 14], d_neg in [-14, -5], b in [3, 9], omega in [1.2, 1.8]; the dead-zone heights
+    are set through dh = (h_neg - h_pos)/omega = mean backlash * U(0.7, 1.3) >= 0 around a random
+    centre, which keeps every model valid (the dead zone, >= 10 deg wide, exceeds any b - dh).
+    The motor-current parameters are drawn too, so the current signature varies as well.
+    """
+    knobs = {}
+    for k in (1, 2):
+        b_pos, b_neg = rng.uniform(3.0, 9.0, 2)
+        omega = rng.uniform(1.2, 1.8)
+        dh = 0.5 * (b_pos + b_neg) * rng.uniform(0.7, 1.3)
+        h_mid = rng.uniform(-1.0, 1.0)
+        knobs[k] = KnobModel(d_pos=rng.uniform(5.0, 14.0), d_neg=rng.uniform(-14.0, -5.0),
+                             b_pos=b_pos, b_neg=b_neg, omega=omega,
+                             h_pos=h_mid - 0.5 * omega * dh, h_neg=h_mid + 0.5 * omega * dh)
+    current = twin.CurrentParams(no_load=rng.uniform(80, 160), coulomb=rng.uniform(3, 9),
+                                 k_load=rng.uniform(3, 5), mu=rng.uniform(0.15, 0.3),
+                                 noise=rng.uniform(2, 4))
+    return twin.VirtualCatheter(name, knobs, Geometry(1.2, 8.0), current)
+
+
+def paper_sweep(cat: twin.VirtualCatheter, seed: int, knobs=(1, 2)) -> Run:
+    t, q = twin.sweep()  # +-40 deg, 2 cycles, 40 deg/s, 1 kHz (paper section II-C-2)
+    return twin.simulate(cat, t, {k: q for k in knobs}, seed=seed, effects=(), noise=True)
+
+
+_CASES: dict[int, tuple] = {}
+
+
+def case(i: int):
+    """(catheter, run, tip identification, current-only identification) of random set ``i``."""
+    if i not in _CASES:
+        cat = random_catheter(np.random.default_rng(1000 + i), f"random-{i}")
+        run = paper_sweep(cat, seed=i)
+        _CASES[i] = (cat, run, identify(run), identify(run, use_tip=False))
+    return _CASES[i]
+
+
+def sine_sweep(lo: float, hi: float, cycles: float = 2.0, speed: float = 40.0, fs: float = 1000.0):
+    """A sine between ``lo`` and ``hi`` starting at the middle going up."""
+    amp, mid = 0.5 * (hi - lo), 0.5 * (hi + lo)
+    w = speed / amp
+    t = np.arange(int(round(cycles * 2 * math.pi / w * fs)) + 1) / fs
+    return t, mid + amp * np.sin(w * t)
+
+
+ICE_A = twin.get_catheter("ice-a")
+
+
+def ice_a_run(lo: float, hi: float, cycles: float = 2.0) -> Run:
+    t, q = sine_sweep(lo, hi, cycles)
+    return twin.simulate(ICE_A, t, {1: q}, seed=3, effects=())
+
+
+# --------------------------------------------------------------------------------------------
+# Must-show 3: recovery of known parameters over many sets
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("i", range(N_SETS))
+def test_tip_fit_recovers_all_parameters(i):
+    cat, run, res, _ = case(i)
+    for k in (1, 2):
+        true, got = cat.knobs[k], res.fits[k].model
+        assert res.fits[k].method == "tip"
+        for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+            assert abs(getattr(got, name) - getattr(true, name)) <= 0.5, (k, name, got, true)
+        assert abs(got.omega - true.omega) <= 0.02 * true.omega, (k, got.omega, true.omega)
+        # heights: not in the issue's list, but the fit has them; 0.5 deg of tip
+        assert abs(got.h_pos - true.h_pos) <= 0.5 and abs(got.h_neg - true.h_neg) <= 0.5
+
+
+@pytest.mark.parametrize("i", range(N_SETS))
+def test_current_only_recovers_edges_and_backlash(i):
+    cat, run, _, res = case(i)
+    for k in (1, 2):
+        true, got = cat.knobs[k], res.fits[k].model
+        assert res.fits[k].method == "current"
+        assert abs(got.d_pos - true.d_pos) <= 1.0, (k, got.d_pos, true.d_pos)
+        assert abs(got.d_neg - true.d_neg) <= 1.0, (k, got.d_neg, true.d_neg)
+        # backlash from the current alone: the width of the steep stretch after each reversal
+        assert abs(got.b_pos - true.b_pos) <= 1.0, (k, got.b_pos, true.b_pos)
+        assert abs(got.b_neg - true.b_neg) <= 1.0, (k, got.b_neg, true.b_neg)
+
+
+def test_current_only_heights_follow_the_documented_assumption():
+    _, _, _, res = case(0)
+    for fit in res.fits.values():
+        m = fit.model
+        assert m.omega == PAPER_OMEGA
+        # loop centred on the straight tip, H_neg - H_pos = omega * (B_pos + B_neg) / 2
+        assert m.h_pos == pytest.approx(-m.h_neg, abs=1e-12)
+        assert m.h_neg - m.h_pos == pytest.approx(m.omega * 0.5 * (m.b_pos + m.b_neg), rel=1e-12)
+        assert set(fit.stderr) == {"d_pos", "d_neg", "b_pos", "b_neg"}
+    _, run, _, _ = case(0)
+    m = identify(run, use_tip=False, omega=1.6).model
+    assert m.knob(1).omega == 1.6 and m.knob(2).omega == 1.6
+
+
+def test_tip_fit_rmse_is_at_the_noise_level_and_uncertainties_are_sane():
+    cat, run, res, _ = case(1)
+    for k, fit in res.fits.items():
+        # filtered EM noise: 0.3 deg * sqrt(2 * 20 Hz / 1000 Hz) = 0.06 deg rms (white noise
+        # through a ~20 Hz band); a correct model leaves about that, a wrong one far more
+        assert 0.03 < fit.rmse < 0.15
+        assert set(fit.stderr) == {"d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg"}
+        for name, se in fit.stderr.items():
+            assert math.isfinite(se) and se > 0, name
+            # within 6 sigma of the truth (a sigma far too small would fail here)
+            assert abs(getattr(fit.model, name) - getattr(cat.knobs[k], name)) <= 6 * se + 1e-3, name
+        assert fit.ident.rmse == fit.rmse
+
+
+def test_stored_levels_for_detect_shift():
+    cat, run, res, _ = case(2)
+    for k, fit in res.fits.items():
+        cur = cat.current
+        ident = fit.ident
+        # twin current model: loading slope k_load (1 + mu) once a tendon is taut
+        assert ident.slope_loaded == pytest.approx(cur.k_load * (1 + cur.mu), rel=0.1)
+        # flat dead zone: only noise; far below the loaded slope
+        assert ident.slope_dead_zone < 0.2 * ident.slope_loaded
+        assert ident.slope_dead_zone < ident.eps_lower < ident.slope_loaded < ident.eps_upper
+        # the dead-zone current is the no-load level +- the motor's Coulomb friction
+        assert abs(ident.current_dead_zone - cur.no_load) <= cur.coulomb + 2.0
+        assert ident.q_min == pytest.approx(-40.0, abs=1e-3)
+        assert ident.q_max == pytest.approx(40.0, abs=1e-3)
+    assert dict(res.model.identification) == {k: f.ident for k, f in res.fits.items()}
+    assert res.model.meta["method"] == "tip"
+    assert all(res.model.knob(k).offset == 0.0 for k in (1, 2))
+
+
+def test_y0_is_the_first_measured_tip_angle():
+    # crop the paper's sweep at its first descending zero crossing (t = pi): the tip then sits on
+    # the descending dead zone at H_neg = 4.2 deg (ice-a knob 1), not at the straight tip y = 0
+    run = paper_sweep(ICE_A, 5, knobs=(1,))
+    start = int(np.argmin(np.abs(run["t"] - math.pi)))
+    cropped = Run({n: v[start:] for n, v in run.columns.items()})
+    q, y = cropped["q1"], cropped["y1"]
+    assert abs(y[0] - 4.2) < 0.3
+    fit = identify(cropped).fits[1]
+    assert fit.rmse < 0.15
+    assert abs(fit.model.d_pos - 9.1) <= 0.5 and abs(fit.model.b_pos - 6.2) <= 0.5
+    # the model started from y[0] follows the first dead-zone stretch; from 0 it would sit 4 deg off
+    head = slice(0, 100)
+    assert np.max(np.abs(fit.model.forward(q, y[0])[head] - y[head])) < 0.5
+    assert np.min(np.abs(fit.model.forward(q, 0.0)[head] - y[head])) > 3.0
+
+
+# --------------------------------------------------------------------------------------------
+# determinism
+# --------------------------------------------------------------------------------------------
+def test_identify_is_deterministic():
+    _, run, res, _ = case(3)
+    again = identify(run)
+    for k in res.fits:
+        assert again.fits[k].model == res.fits[k].model
+        assert again.fits[k].stderr == res.fits[k].stderr
+    a = identify(run, bootstrap=5, seed=7, use_tip=False)
+    b = identify(run, bootstrap=5, seed=7, use_tip=False)
+    assert a.fits[1].stderr == b.fits[1].stderr
+    assert a.fits[1].bootstrap == 5
+
+
+def test_bootstrap_over_cycles_uses_the_seed():
+    t, q = sine_sweep(-40, 40, cycles=6)
+    run = twin.simulate(ICE_A, t, {1: q}, seed=11, effects=())
+    a = identify(run, bootstrap=8, seed=1).fits[1]
+    b = identify(run, bootstrap=8, seed=1).fits[1]
+    c = identify(run, bootstrap=8, seed=2).fits[1]
+    assert a.stderr == b.stderr
+    assert a.stderr != c.stderr
+    assert a.model == c.model  # the estimate itself does not depend on the bootstrap
+    # 6 sine cycles from 0: 12 reversals, 11 complete branches, 5 full cycles (pairs of them)
+    assert a.n_reversals == 12 and a.n_cycles == 5
+
+
+# --------------------------------------------------------------------------------------------
+# sweep checks: every way a sweep can fail to identify, with a message saying what is missing
+# --------------------------------------------------------------------------------------------
+def test_never_reverses():
+    t = np.linspace(0, 4, 4001)
+    run = twin.simulate(ICE_A, t, {1: np.linspace(-40, 40, t.size)}, effects=())
+    with pytest.raises(IdentificationError, match="never reverses"):
+        identify(run)
+
+
+def test_reverses_only_at_one_end():
+    with pytest.raises(IdentificationError, match="reverses only at its top .* never at its bottom"):
+        identify(ice_a_run(-40, 40, cycles=0.75))  # 0 -> 40 -> -40
+    t, q = sine_sweep(-40, 40, cycles=0.75)
+    run = twin.simulate(ICE_A, t, {1: -q}, effects=())  # 0 -> -40 -> 40
+    with pytest.raises(IdentificationError, match="reverses only at its bottom"):
+        identify(run)
+
+
+def test_needs_a_complete_branch_each_way():
+    # 0 -> 40 -> -40 -> 0: reversals at both ends, but only the descending branch is complete
+    with pytest.raises(IdentificationError, match="no complete ascending branch"):
+        identify(ice_a_run(-40, 40, cycles=1.0))
+
+
+def test_never_past_the_dead_zone():
+    # ice-a knob 1: dead zone [-8.7, 9.1]
+    with pytest.raises(IdentificationError, match="never moves positive past the dead zone: reaches 6.0 deg"):
+        identify(ice_a_run(-6, 6))
+    with pytest.raises(IdentificationError, match="never moves negative past the dead zone: reaches -3.0 deg"):
+        identify(ice_a_run(-3, 40))
+    with pytest.raises(IdentificationError, match="never moves positive past the dead zone: reaches 3.0 deg"):
+        identify(ice_a_run(-40, 3))
+
+
+def test_past_the_dead_zone_but_not_the_backlash():
+    # ice-a knob 1: d_pos + b_pos = 15.3, d_neg - b_neg = -14.6
+    with pytest.raises(IdentificationError,
+                       match="does not move positive past the dead zone plus the backlash: reaches 12.0 deg"):
+        identify(ice_a_run(-40, 12))
+    with pytest.raises(IdentificationError,
+                       match="does not move negative past the dead zone plus the backlash: reaches -13.0 deg"):
+        identify(ice_a_run(-13, 40))
+    # 1.4 deg beyond the edge plus the backlash is enough, and still accurate
+    m = identify(ice_a_run(-16, 40)).fits[1].model
+    assert abs(m.b_neg - 5.9) <= 0.5 and abs(m.d_neg + 8.7) <= 0.5
+
+
+def test_constant_current_and_too_few_samples():
+    t, q = twin.sweep()
+    run = Run({"t": t, "q1": q, "c1": np.full(t.size, 100.0)})
+    with pytest.raises(IdentificationError, match="current c1 is constant"):
+        identify(run)
+    good = paper_sweep(ICE_A, 0, knobs=(1,))
+    short = Run({n: v[:50] for n, v in good.columns.items()})
+    with pytest.raises(IdentificationError, match=r"too few samples \(50\)"):
+        identify(short)
+
+
+def test_knob_columns_and_arguments():
+    good = paper_sweep(ICE_A, 0, knobs=(1,))
+    no_c = Run({"t": good["t"], "q1": good["q1"], "y1": good["y1"]}, source="s.csv")
+    with pytest.raises(IdentificationError, match="s.csv: no knob to identify"):
+        identify(no_c)
+    with pytest.raises(IdentificationError, match="column 'c1' is missing"):
+        identify(no_c, knobs=[1])
+    with pytest.raises(IdentificationError, match="knob 3"):
+        identify(good, knobs=[3])
+    with pytest.raises(IdentificationError, match="omega must be a positive number"):
+        identify(good, omega=-1.0)
+    bad = good.with_columns(c1=np.where(np.arange(len(good)) == 10, np.nan, good["c1"]))
+    with pytest.raises(IdentificationError, match="'c1' has a non-finite value at row 11"):
+        identify(bad)
+    # identify only the knob asked for
+    assert set(identify(paper_sweep(ICE_A, 0), knobs=[2]).fits) == {2}
+
+
+def test_check_sweep_reports_reversals():
+    chk = check_sweep(paper_sweep(ICE_A, 0, knobs=(1,)), 1)
+    # sin over 2 cycles from 0: tops at 1/4 and 5/4 of the period, bottoms at 3/4 and 7/4
+    assert list(chk.tops) == [True, False, True, False]
+    assert [d for _, _, d in chk.branches] == [-1, 1, -1]
+    assert chk.n_cycles == 1
+
+
+# --------------------------------------------------------------------------------------------
+# reversals
+# --------------------------------------------------------------------------------------------
+def test_find_reversals_by_hand():
+    q = np.array([0, 1, 2, 3, 2, 1, 0, 1, 2, 2.1, 2.0])
+    idx, top = find_reversals(q, tol=0.5)
+    assert list(idx) == [3, 6]  # 2.1 -> 2.0 is a wiggle below the tolerance
+    assert list(top) == [True, False]
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.lists(st.floats(1.0, 50.0), min_size=1, max_size=8), st.booleans(),
+       st.integers(3, 40))
+def test_find_reversals_finds_every_turning_point(legs, up, n):
+    # a zig-zag of legs longer than the tolerance: every corner but the last end is a reversal
+    q, corners, level, d = [0.0], [], 0.0, (1 if up else -1)
+    for leg in legs:
+        seg = level + d * leg * np.arange(1, n + 1) / n
+        q.extend(seg)
+        level = seg[-1]
+        corners.append(len(q) - 1)
+        d = -d
+    idx, top = find_reversals(np.array(q), tol=0.5)
+    assert list(idx) == corners[:-1]
+    assert list(top) == [(i % 2 == 0) == up for i in range(len(corners) - 1)]
+
+
+# --------------------------------------------------------------------------------------------
+# figure
+# --------------------------------------------------------------------------------------------
+def test_plot_identification_writes_a_png(tmp_path):
+    _, run, res, _ = case(0)
+    out = tmp_path / "fit.png"
+    plot_identification(run, res, out)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    assert [p.name for p in tmp_path.iterdir()] == ["fit.png"]  # no temporary left behind
+    with pytest.raises(DataError, match="does not exist"):
+        plot_identification(run, res, tmp_path / "missing" / "fit.png")
