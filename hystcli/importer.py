@@ -1,0 +1,936 @@
+"""Foreign logs to run CSVs: column mappings, presets, and the conditioning real data needs.
+
+This module owns ``hyst import`` (docs/import.md holds the user's view). A *mapping*
+(:class:`ImportMapping`) says how to read one logger's text files: separator, comment prefix,
+header lines to skip, which 1-based column becomes which run column (``t``, ``q1`` ... ``r2`` of
+DESIGN.md section 6) with ``value = raw * scale + offset``, and where the metadata comes from
+(fixed values, regular expressions over the header lines, and over a ``README`` beside the file).
+A *preset* is a named, built-in mapping (:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data
+set of ``../shared/real/mrdlab``).
+
+What real hardware logs need, learnt from that data set and handled here, not by hand-editing:
+
+- incremental encoders, whose zero is arbitrary: ``zero`` = ``none`` (default) / ``first`` /
+  ``mean`` subtracts nothing, the first sample, or the mean of each input and output column. The
+  default is ``none`` because the offset between runs of one session is information (the hysteresis
+  shift of DESIGN.md section 3 *is* an offset; on the MRDLab load series the mean jaw angle falls by
+  about 1.3 deg per 10 % of load torque), and the model absorbs any constant zero anyway (its
+  ``offset`` and heights). Use ``mean`` when every file was recorded after a fresh encoder reset;
+- the sign of the gain: the least-squares slope of output on input is reported; a negative gain
+  (the model needs the output to rise with the input) is a warning unless ``flip_output`` negates
+  the output (and reference) columns;
+- non-increasing time stamps: an error naming the line, or with ``time_repair="drop"`` the rows
+  whose time is not later than the last kept row are dropped (the first of duplicates kept) and
+  counted in the report. Time is shifted to start at 0;
+- different sampling rates: ``resample`` interpolates every column linearly onto a uniform grid,
+  after a zero-phase Butterworth anti-alias low-pass at 0.4 x the new rate when it is lower;
+- drift: the output's drift (deg/s, a least-squares ``y ~ gain*q + b + drift*t``) is reported;
+  ``detrend`` removes it. Off by default: slow creep is an effect the diagnosis should see
+  (DESIGN.md section 8), not something to erase silently.
+
+Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) comes back in an
+:class:`ImportReport` beside the converted :class:`~hystcli.io.Run`.
+"""
+from __future__ import annotations
+
+import gzip
+import json
+import math
+import os
+import re
+import zlib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Iterable, Mapping, Sequence
+
+import numpy as np
+
+from .errors import DataError
+from .filters import lowpass
+from .io import KNOWN_COLUMNS, Run
+
+TARGETS = KNOWN_COLUMNS
+"""Run columns a mapping may fill (DESIGN.md section 6)."""
+
+ZERO_MODES = ("none", "first", "mean")
+TIME_REPAIRS = ("error", "drop")
+MAPPING_FORMAT = "hyst-import"
+MAPPING_VERSION = 1
+
+ANTI_ALIAS_FRACTION = 0.4
+"""Anti-alias cut-off of :func:`resample` as a fraction of the new sample rate."""
+
+_IRREGULAR = 1.5  # a step longer than this many median steps makes the sampling "irregular"
+_KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
+
+
+# --------------------------------------------------------------------------------------------
+# mappings
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ColumnMap:
+    """One run column from one raw column: ``value = raw * scale + offset``.
+
+    Attributes
+    ----------
+    target : str
+        Run column name (one of :data:`TARGETS`).
+    column : int
+        1-based column number in the raw file.
+    scale, offset : float
+        Linear conversion to the run's units (deg, s, the current's unit).
+    """
+
+    target: str
+    column: int
+    scale: float = 1.0
+    offset: float = 0.0
+
+    def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise DataError(f"mapping: unknown target column {self.target!r} "
+                            f"(targets: {', '.join(TARGETS)})")
+        if isinstance(self.column, bool) or not isinstance(self.column, int) or self.column < 1:
+            raise DataError(f"mapping: {self.target}: column must be a number >= 1 (columns count from 1), "
+                            f"got {self.column!r}")
+        for name in ("scale", "offset"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                raise DataError(f"mapping: {self.target}: {name} must be a finite number, got {v!r}")
+        if self.scale == 0:
+            raise DataError(f"mapping: {self.target}: scale 0 would erase the column")
+
+    def spec(self) -> str:
+        """The ``target=column:scale[:offset]`` form of :func:`parse_map_spec`."""
+        s = f"{self.target}={self.column}:{self.scale!r}"
+        return s + (f":{self.offset!r}" if self.offset else "")
+
+
+@dataclass(frozen=True)
+class MetaPattern:
+    """Metadata read from text by a regular expression.
+
+    With ``key`` set, the value is the first group of the match (the whole match when the pattern
+    has no group); with ``key`` None, every named group ``(?P<name>...)`` gives one key.
+    """
+
+    regex: str
+    key: str | None = None
+
+    def __post_init__(self) -> None:
+        try:
+            compiled = re.compile(self.regex)
+        except re.error as exc:
+            raise DataError(f"metadata pattern {self.regex!r} is not a valid regular expression ({exc})") from None
+        if self.key is None and not compiled.groupindex:
+            raise DataError(f"metadata pattern {self.regex!r} needs named groups (?P<key>...) "
+                            "or the form key=REGEX")
+        if self.key is not None and not _KEY_RE.match(self.key):
+            raise DataError(f"metadata pattern: {self.key!r} is not a valid metadata key")
+
+    @property
+    def keys(self) -> tuple[str, ...]:
+        """The metadata keys this pattern can fill."""
+        return (self.key,) if self.key else tuple(re.compile(self.regex).groupindex)
+
+    def search(self, lines: Sequence[str]) -> dict[str, str]:
+        """Metadata from the first line that matches (empty when none does)."""
+        rx = re.compile(self.regex)
+        for line in lines:
+            m = rx.search(line)
+            if m is None:
+                continue
+            if self.key is not None:
+                return {self.key: (m.group(1) if rx.groups else m.group(0)).strip()}
+            return {k: v.strip() for k, v in m.groupdict().items() if v is not None}
+        return {}
+
+
+@dataclass(frozen=True)
+class ImportMapping:
+    """How to read one logger's files and turn them into runs.
+
+    Attributes
+    ----------
+    columns : tuple of ColumnMap
+        At most one per target; ``t`` may be absent when ``rate`` is given.
+    separator : str or None
+        Field separator; None splits on any whitespace.
+    comment : str or None
+        Lines starting with this prefix are header lines (searched by ``meta_from_header``).
+    skip : int
+        Lines at the top of the file skipped before anything else (also searched for metadata).
+    rate : float or None
+        Sample rate (Hz) for logs without a time column: ``t = i / rate``.
+    meta : mapping of str to str
+        Fixed metadata; ``{key}`` in a value is replaced by metadata found in the header.
+    meta_from_header : tuple of MetaPattern
+        Patterns searched in the skipped and comment lines.
+    meta_from_readme : tuple of MetaPattern
+        Patterns searched in a ``README*`` file in the raw file's folder (case-insensitive name).
+    flip_output : bool
+        Negate the output (``y``) and reference (``r``) columns.
+    name : str
+        Preset name or where the mapping came from, for the report.
+    """
+
+    columns: tuple[ColumnMap, ...]
+    separator: str | None = ","
+    comment: str | None = "#"
+    skip: int = 0
+    rate: float | None = None
+    meta: Mapping[str, str] = field(default_factory=dict)
+    meta_from_header: tuple[MetaPattern, ...] = ()
+    meta_from_readme: tuple[MetaPattern, ...] = ()
+    flip_output: bool = False
+    name: str = "custom"
+
+    def __post_init__(self) -> None:
+        seen: set[str] = set()
+        for c in self.columns:
+            if c.target in seen:
+                raise DataError(f"mapping: column {c.target} is mapped twice")
+            seen.add(c.target)
+        if not self.columns:
+            raise DataError("mapping: no column is mapped (give --preset, --map or --mapping)")
+        if "t" not in seen and self.rate is None:
+            raise DataError("mapping: no time column: map t=COLUMN or give the sample rate (--rate HZ)")
+        if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
+            raise DataError(f"mapping: rate must be a positive number of Hz, got {self.rate!r}")
+        if isinstance(self.skip, bool) or not isinstance(self.skip, int) or self.skip < 0:
+            raise DataError(f"mapping: skip must be a whole number >= 0, got {self.skip!r}")
+        if self.separator is not None and (self.separator == "" or "\n" in self.separator):
+            raise DataError("mapping: the separator must be a non-empty string (or whitespace)")
+        if self.comment is not None and self.comment == "":
+            raise DataError("mapping: the comment prefix must not be empty")
+        for k in self.meta:
+            if not _KEY_RE.match(str(k)):
+                raise DataError(f"mapping: {k!r} is not a valid metadata key")
+        object.__setattr__(self, "meta", {str(k): str(v) for k, v in self.meta.items()})
+
+    def column(self, target: str) -> ColumnMap | None:
+        """The mapping of one target, if any."""
+        return next((c for c in self.columns if c.target == target), None)
+
+    def with_columns(self, extra: Iterable[ColumnMap]) -> "ImportMapping":
+        """A copy where ``extra`` replaces (per target) or adds column mappings."""
+        cols = {c.target: c for c in self.columns}
+        for c in extra:
+            cols[c.target] = c
+        return replace(self, columns=tuple(cols.values()))
+
+
+def parse_number(text: str, what: str) -> float:
+    """A finite number, written as a decimal or a fraction ``a/b`` (e.g. ``360/8192``)."""
+    s = str(text).strip()
+    try:
+        if "/" in s:
+            num, den = s.split("/", 1)
+            v = float(num) / float(den)
+        else:
+            v = float(s)
+    except (ValueError, ZeroDivisionError):
+        raise DataError(f"{what}: {text!r} is not a number") from None
+    if not math.isfinite(v):
+        raise DataError(f"{what}: {text!r} is not a finite number")
+    return v
+
+
+def parse_map_spec(spec: str) -> tuple[ColumnMap, ...]:
+    """Parse ``t=1:0.001,q1=2:360/8192,y1=5:0.09:-12.5,c1=4``.
+
+    Each item is ``target=column[:scale[:offset]]``; ``column`` counts from 1, ``scale``
+    defaults to 1 and ``offset`` to 0 (``value = raw * scale + offset``); scale and offset may
+    be fractions.
+    """
+    out = []
+    for item in (s.strip() for s in str(spec).split(",")):
+        if not item:
+            continue
+        if "=" not in item:
+            raise DataError(f"mapping {item!r}: expected target=column[:scale[:offset]]")
+        target, _, rhs = item.partition("=")
+        target = target.strip()
+        parts = [p.strip() for p in rhs.split(":")]
+        if len(parts) > 3 or not parts[0]:
+            raise DataError(f"mapping {item!r}: expected target=column[:scale[:offset]]")
+        try:
+            col = int(parts[0])
+        except ValueError:
+            raise DataError(f"mapping {item!r}: column {parts[0]!r} is not a whole number") from None
+        scale = parse_number(parts[1], f"mapping {item!r} scale") if len(parts) > 1 and parts[1] else 1.0
+        offset = parse_number(parts[2], f"mapping {item!r} offset") if len(parts) > 2 and parts[2] else 0.0
+        out.append(ColumnMap(target, col, scale, offset))
+    if not out:
+        raise DataError(f"mapping {spec!r}: no column given")
+    return tuple(out)
+
+
+def parse_meta_pattern(text: str) -> MetaPattern:
+    """``key=REGEX`` (value = first group) or a bare REGEX with named groups."""
+    m = re.match(r"^([A-Za-z_][A-Za-z0-9_.-]*)=(.+)$", str(text), re.S)
+    if m and not str(text).startswith("(?"):
+        return MetaPattern(m.group(2), m.group(1))
+    return MetaPattern(str(text))
+
+
+def parse_meta_option(text: str) -> tuple[str, str]:
+    """``key=value`` of ``--meta``."""
+    key, sep, value = str(text).partition("=")
+    key = key.strip()
+    if not sep or not _KEY_RE.match(key):
+        raise DataError(f"metadata {text!r}: expected key=value (key of letters, digits, _ . -)")
+    return key, value.strip()
+
+
+def parse_separator(value: object) -> str | None:
+    """A separator option: a string, or 'tab', 'comma', 'semicolon', 'whitespace' (None: any whitespace)."""
+    if value is None:
+        return None
+    s = str(value)
+    named = {"whitespace": None, "space": None, " ": None, "tab": "\t", "\\t": "\t",
+             "comma": ",", "semicolon": ";"}
+    return named.get(s.lower() if s.strip() else s, s)
+
+
+def _patterns(value: object, where: str) -> tuple[MetaPattern, ...]:
+    if value is None:
+        return ()
+    if isinstance(value, dict):
+        out = []
+        for k, v in value.items():
+            if not isinstance(v, str):
+                raise DataError(f"{where}: the pattern of {k!r} must be a string")
+            out.append(MetaPattern(v, str(k)))
+        return tuple(out)
+    if isinstance(value, list) and all(isinstance(v, str) for v in value):
+        return tuple(parse_meta_pattern(v) for v in value)
+    raise DataError(f"{where}: expected an object {{key: regex}} or a list of regex strings")
+
+
+_MAPPING_KEYS = {"format", "version", "name", "columns", "separator", "comment", "skip", "rate", "meta",
+                 "meta_from_header", "meta_from_readme", "flip_output"}
+
+
+def mapping_from_dict(data: object, source: str = "<mapping>") -> ImportMapping:
+    """Build an :class:`ImportMapping` from the JSON form documented in docs/import.md."""
+    if not isinstance(data, dict):
+        raise DataError(f"{source}: a mapping must be a JSON object")
+    unknown = sorted(set(data) - _MAPPING_KEYS)
+    if unknown:
+        raise DataError(f"{source}: unknown key {unknown[0]!r} (keys: {', '.join(sorted(_MAPPING_KEYS))})")
+    if data.get("format", MAPPING_FORMAT) != MAPPING_FORMAT:
+        raise DataError(f"{source}: \"format\" must be {MAPPING_FORMAT!r}, got {data.get('format')!r}")
+    if data.get("version", MAPPING_VERSION) != MAPPING_VERSION:
+        raise DataError(f"{source}: unknown mapping version {data.get('version')!r} "
+                        f"(this hyst reads version {MAPPING_VERSION})")
+    cols_raw = data.get("columns")
+    if not isinstance(cols_raw, dict) or not cols_raw:
+        raise DataError(f"{source}: \"columns\" must be an object such as {{\"t\": 1, \"q1\": {{\"column\": 2, "
+                        f"\"scale\": \"360/8192\"}}}}")
+    cols = []
+    try:
+        for target, v in cols_raw.items():
+            if isinstance(v, int) and not isinstance(v, bool):
+                cols.append(ColumnMap(target, v))
+                continue
+            if not isinstance(v, dict) or "column" not in v:
+                raise DataError(f"mapping: {target}: expected a column number or {{\"column\": N, \"scale\": S, "
+                                f"\"offset\": O}}")
+            bad = sorted(set(v) - {"column", "scale", "offset"})
+            if bad:
+                raise DataError(f"mapping: {target}: unknown key {bad[0]!r}")
+            num = {}
+            for name in ("scale", "offset"):
+                if name in v:
+                    x = v[name]
+                    num[name] = (parse_number(x, f"mapping: {target}: {name}") if isinstance(x, str) else x)
+            cols.append(ColumnMap(target, v["column"], **num))
+        meta = data.get("meta") or {}
+        if not isinstance(meta, dict) or not all(isinstance(x, (str, int, float)) for x in meta.values()):
+            raise DataError("mapping: \"meta\" must be an object of strings")
+        rate = data.get("rate")
+        if rate is not None and (isinstance(rate, bool) or not isinstance(rate, (int, float))):
+            raise DataError(f"mapping: rate must be a number of Hz, got {rate!r}")
+        flip = data.get("flip_output", False)
+        if not isinstance(flip, bool):
+            raise DataError(f"mapping: flip_output must be true or false, got {flip!r}")
+        return ImportMapping(
+            columns=tuple(cols),
+            separator=parse_separator(data.get("separator", ",")),
+            comment=data.get("comment", "#"),
+            skip=data.get("skip", 0),
+            rate=None if rate is None else float(rate),
+            meta={str(k): str(v) for k, v in meta.items()},
+            meta_from_header=_patterns(data.get("meta_from_header"), "mapping: meta_from_header"),
+            meta_from_readme=_patterns(data.get("meta_from_readme"), "mapping: meta_from_readme"),
+            flip_output=flip,
+            name=str(data.get("name", Path(source).name)),
+        )
+    except DataError as exc:
+        msg = str(exc)
+        raise DataError(f"{source}: {msg[len('mapping: '):] if msg.startswith('mapping: ') else msg}") from None
+
+
+def mapping_to_dict(mapping: ImportMapping) -> dict:
+    """The JSON form of a mapping (``hyst import --preset mrdlab --show-mapping`` prints it)."""
+    return {
+        "format": MAPPING_FORMAT, "version": MAPPING_VERSION, "name": mapping.name,
+        "columns": {c.target: {"column": c.column, "scale": c.scale, "offset": c.offset} for c in mapping.columns},
+        "separator": "whitespace" if mapping.separator is None else mapping.separator,
+        "comment": mapping.comment, "skip": mapping.skip, "rate": mapping.rate, "meta": dict(mapping.meta),
+        "meta_from_header": [p.regex if p.key is None else f"{p.key}={p.regex}" for p in mapping.meta_from_header],
+        "meta_from_readme": [p.regex if p.key is None else f"{p.key}={p.regex}" for p in mapping.meta_from_readme],
+        "flip_output": mapping.flip_output,
+    }
+
+
+def load_mapping(path: str | os.PathLike) -> ImportMapping:
+    """Read a mapping JSON file (docs/import.md)."""
+    p = Path(path)
+    if not p.is_file():
+        raise DataError(f"{path}: no such mapping file")
+    try:
+        data = json.loads(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise DataError(f"{path}: cannot read the mapping ({exc})") from None
+    except json.JSONDecodeError as exc:
+        raise DataError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
+    return mapping_from_dict(data, source=str(path))
+
+
+# --------------------------------------------------------------------------------------------
+# presets
+# --------------------------------------------------------------------------------------------
+MRDLAB = ImportMapping(
+    name="mrdlab",
+    columns=(
+        # column 1 is labelled [ms] but steps by 0.001 per 1 kHz row: it is seconds
+        ColumnMap("t", 1, 1.0),
+        ColumnMap("q1", 2, 360.0 / 8192.0),   # back-end (input spindle) encoder, 8192 counts/rev
+        ColumnMap("y1", 5, 360.0 / 4000.0),   # front-end (jaw) encoder, 4000 counts/rev
+        ColumnMap("c1", 4, 1.0),              # back-end motor current, A
+    ),
+    separator=",",
+    comment="%",
+    meta={"catheter": "endowrist-tool{tool}", "motion": "periodic", "current_unit": "A",
+          "dataset": "mrdlab"},
+    meta_from_header=(
+        MetaPattern(r"tool number (\d+)", "tool"),
+        MetaPattern(r"Used (\w+) spindle", "spindle"),
+        MetaPattern(r"with a ([0-9.]+) Hz", "frequency_hz"),
+        MetaPattern(r"amplitude of ([0-9.]+) degrees", "amplitude_deg"),
+        MetaPattern(r"reaction torque of ([0-9.]+) percent", "load_pct"),
+    ),
+    meta_from_readme=(
+        MetaPattern(r"pitch of ([+-]?[0-9.]+) degrees", "pitch_deg"),
+        MetaPattern(r"roll of ([+-]?[0-9.]+) degrees", "roll_deg"),
+    ),
+    # the jaw encoder counts against the spindle (gain -0.85 .. -0.91 on all 32 files); the model
+    # needs an output that rises with the input
+    flip_output=True,
+)
+
+PRESETS: dict[str, ImportMapping] = {"mrdlab": MRDLAB}
+"""Built-in mappings by name."""
+
+
+def get_preset(name: str) -> ImportMapping:
+    """A built-in mapping by name (:data:`PRESETS`)."""
+    try:
+        return PRESETS[name]
+    except KeyError:
+        raise DataError(f"unknown preset {name!r} (presets: {', '.join(PRESETS)})") from None
+
+
+# --------------------------------------------------------------------------------------------
+# options and report
+# --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ImportOptions:
+    """Conditioning applied after the mapping (module docstring says why each exists).
+
+    Attributes
+    ----------
+    zero : {"none", "first", "mean"}
+        Subtract nothing, the first sample, or the mean of each ``q`` and ``y`` column (``r``
+        moves with its knob's ``y``).
+    flip_output : bool or None
+        Negate ``y`` and ``r``; None keeps the mapping's choice.
+    resample : float or None
+        New uniform sample rate (Hz).
+    detrend : bool
+        Remove the output's linear drift (estimated jointly with a static gain on the input).
+    time_repair : {"error", "drop"}
+        What to do with non-increasing time stamps.
+    decimals : int or None
+        Round every value to this many decimals (in the run's units) to keep files small.
+    meta : mapping of str to str
+        Extra metadata (wins over the mapping's and the header's).
+    """
+
+    zero: str = "none"
+    flip_output: bool | None = None
+    resample: float | None = None
+    detrend: bool = False
+    time_repair: str = "error"
+    decimals: int | None = None
+    meta: Mapping[str, str] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.zero not in ZERO_MODES:
+            raise DataError(f"zero must be one of {', '.join(ZERO_MODES)}, got {self.zero!r}")
+        if self.time_repair not in TIME_REPAIRS:
+            raise DataError(f"time repair must be one of {', '.join(TIME_REPAIRS)}, got {self.time_repair!r}")
+        if self.resample is not None and not (math.isfinite(self.resample) and self.resample > 0):
+            raise DataError(f"resample rate must be a positive number of Hz, got {self.resample!r}")
+        if self.decimals is not None and not (0 <= self.decimals <= 15):
+            raise DataError(f"decimals must be between 0 and 15, got {self.decimals!r}")
+
+
+@dataclass(frozen=True)
+class KnobReport:
+    """What the import learnt of one knob's input/output pair.
+
+    Attributes
+    ----------
+    knob : int
+    gain : float or None
+        Least-squares slope of ``y`` on ``q`` as read, before any flip (None without ``y``).
+    flipped : bool
+        Whether ``y`` (and ``r``) were negated.
+    drift : float or None
+        Drift of the output (deg/s; after the flip), jointly fitted with the static gain.
+    detrended : bool
+    zero : dict of str to float
+        Value subtracted from each zeroed column.
+    """
+
+    knob: int
+    gain: float | None
+    flipped: bool
+    drift: float | None
+    detrended: bool
+    zero: dict[str, float]
+
+
+@dataclass(frozen=True)
+class ImportReport:
+    """Everything :func:`convert` did to one file.
+
+    Attributes
+    ----------
+    source : str
+    mapping : str
+        Preset or mapping name.
+    rows_read, rows_dropped, rows_out : int
+    rate_in, rate_out : float
+        Median sample rates (Hz) before and after resampling.
+    irregular : bool
+        Whether the input's steps vary by more than 50 % around the median.
+    duration : float
+        Length of the output (s).
+    t_start : float
+        Time of the first raw sample (the output starts at 0).
+    ranges : dict of str to (float, float)
+        Min and max of every output column.
+    knobs : tuple of KnobReport
+    resampled, anti_aliased : bool
+    warnings : tuple of str
+    """
+
+    source: str
+    mapping: str
+    rows_read: int
+    rows_dropped: int
+    rows_out: int
+    rate_in: float
+    rate_out: float
+    irregular: bool
+    duration: float
+    t_start: float
+    ranges: dict[str, tuple[float, float]]
+    knobs: tuple[KnobReport, ...]
+    resampled: bool
+    anti_aliased: bool
+    warnings: tuple[str, ...]
+
+    def to_dict(self) -> dict:
+        """JSON-ready form."""
+        return {
+            "source": self.source, "mapping": self.mapping, "rows_read": self.rows_read,
+            "rows_dropped": self.rows_dropped, "rows_out": self.rows_out, "rate_in": self.rate_in,
+            "rate_out": self.rate_out, "irregular": self.irregular, "duration": self.duration,
+            "t_start": self.t_start, "ranges": {k: list(v) for k, v in self.ranges.items()},
+            "knobs": [{"knob": k.knob, "gain": k.gain, "flipped": k.flipped, "drift": k.drift,
+                       "detrended": k.detrended, "zero": k.zero} for k in self.knobs],
+            "resampled": self.resampled, "anti_aliased": self.anti_aliased, "warnings": list(self.warnings),
+        }
+
+
+@dataclass(frozen=True)
+class Imported:
+    """A converted file: the run and the report of what was done."""
+
+    run: Run
+    report: ImportReport
+
+
+# --------------------------------------------------------------------------------------------
+# reading
+# --------------------------------------------------------------------------------------------
+def read_text(path: str | os.PathLike) -> str:
+    """Text of a raw log, gunzipped when it is gzip data (by content, not by name).
+
+    Raises
+    ------
+    DataError
+        Missing, unreadable, corrupt gzip, binary (NUL bytes) or empty file.
+    """
+    p = Path(path)
+    if not p.exists():
+        raise DataError(f"{path}: no such file")
+    if p.is_dir():
+        raise DataError(f"{path}: is a directory, not a log file")
+    try:
+        raw = p.read_bytes()
+        if raw[:2] == b"\x1f\x8b":
+            raw = gzip.decompress(raw)
+    except OSError as exc:
+        if isinstance(exc, (gzip.BadGzipFile, EOFError)) or not getattr(exc, "strerror", None):
+            raise DataError(f"{path}: corrupt gzip data ({exc})") from None
+        raise DataError(f"{path}: cannot read ({exc.strerror})") from None
+    except (EOFError, zlib.error) as exc:
+        raise DataError(f"{path}: corrupt gzip data ({exc})") from None
+    if b"\x00" in raw:
+        raise DataError(f"{path}: binary data (NUL bytes), not a text log")
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError:
+        # loggers on Windows write cp1252 (degree signs, micro signs) in their headers
+        text = raw.decode("latin-1")
+    if not text.strip():
+        raise DataError(f"{path}: empty file")
+    return text.lstrip("\ufeff")
+
+
+def _readme_lines(path: Path) -> list[str]:
+    folder = path.parent
+    lines: list[str] = []
+    try:
+        names = sorted(folder.iterdir())
+    except OSError:
+        return lines
+    for f in names:
+        if f.is_file() and f.name.lower().startswith("readme"):
+            try:
+                lines += f.read_text(encoding="utf-8", errors="replace").splitlines()
+            except OSError:
+                continue
+    return lines
+
+
+def _split(line: str, sep: str | None) -> list[str]:
+    return line.split() if sep is None else line.split(sep)
+
+
+def _parse_table(text: str, mapping: ImportMapping, source: str
+                 ) -> tuple[list[str], np.ndarray, dict[str, np.ndarray]]:
+    """Header lines, raw line numbers (1-based) of the data rows, and the mapped raw columns."""
+    lines = text.splitlines()
+    header = list(lines[:mapping.skip])
+    data: list[tuple[int, str]] = []
+    for i, line in enumerate(lines[mapping.skip:], start=mapping.skip + 1):
+        if mapping.comment is not None and line.lstrip().startswith(mapping.comment):
+            header.append(line)
+        elif line.strip():
+            data.append((i, line))
+    if not data:
+        raise DataError(f"{source}: no data rows (after {mapping.skip} skipped lines and "
+                        f"{len(header) - mapping.skip} comment lines)")
+    need = max(c.column for c in mapping.columns)
+    fields = []
+    for lineno, line in data:
+        parts = _split(line.strip() if mapping.separator is None else line, mapping.separator)
+        if len(parts) < need:
+            raise DataError(f"{source}: line {lineno} has {len(parts)} fields, the mapping reads column {need} "
+                            f"(separator {mapping.separator or 'whitespace'!r})")
+        fields.append(parts)
+    linenos = np.array([n for n, _ in data])
+    cols: dict[str, np.ndarray] = {}
+    for c in mapping.columns:
+        cells = [row[c.column - 1].strip() for row in fields]
+        try:
+            values = np.array(cells, dtype=np.float64)
+        except ValueError:
+            values = None
+        if values is None:
+            for j, cell in enumerate(cells):
+                try:
+                    float(cell)
+                except ValueError:
+                    hint = " (skip header lines with --skip N)" if j == 0 else ""
+                    raise DataError(f"{source}: line {linenos[j]}, column {c.column} ({c.target}): "
+                                    f"{cell!r} is not a number{hint}") from None
+        bad = ~np.isfinite(values)
+        if bad.any():
+            j = int(np.flatnonzero(bad)[0])
+            raise DataError(f"{source}: line {linenos[j]}, column {c.column} ({c.target}): "
+                            f"{cells[j]!r} is not a finite number")
+        cols[c.target] = values * c.scale + c.offset
+    return header, linenos, cols
+
+
+def _time(cols: dict[str, np.ndarray], linenos: np.ndarray, mapping: ImportMapping, repair: str,
+          source: str) -> tuple[dict[str, np.ndarray], int]:
+    n = linenos.size
+    if "t" not in cols:
+        cols = dict(cols, t=np.arange(n) / float(mapping.rate))
+        return cols, 0
+    t = cols["t"]
+    dt = np.diff(t)
+    bad = np.flatnonzero(~(dt > 0))
+    if bad.size == 0:
+        return cols, 0
+    if repair == "error":
+        j = int(bad[0]) + 1
+        what = "repeats" if t[j] == t[j - 1] else "goes back"
+        raise DataError(f"{source}: time {what} at line {linenos[j]} ({t[j - 1]!r} then {t[j]!r}; "
+                        f"{bad.size} non-increasing steps in all): use --time-repair drop to drop such rows")
+    # keep a row only when it is later than every row kept before it
+    keep = t > np.concatenate(([-np.inf], np.maximum.accumulate(t)[:-1]))
+    return {k: v[keep] for k, v in cols.items()}, int(n - keep.sum())
+
+
+def resample(run_cols: Mapping[str, np.ndarray], rate: float) -> tuple[dict[str, np.ndarray], bool]:
+    """Columns on a uniform grid of ``rate`` Hz from the first to the last time stamp.
+
+    Linear interpolation; when ``rate`` is below the source's median rate, every column is first
+    low-passed (zero-phase 3rd-order Butterworth, cut-off :data:`ANTI_ALIAS_FRACTION` x ``rate``)
+    so that noise above the new Nyquist frequency does not fold into the band.
+
+    Returns
+    -------
+    columns : dict of str to numpy.ndarray
+    anti_aliased : bool
+    """
+    t = np.asarray(run_cols["t"], dtype=float)
+    if t.size < 2:
+        raise DataError("cannot resample fewer than 2 samples")
+    fs = 1.0 / float(np.median(np.diff(t)))
+    n = int(math.floor((t[-1] - t[0]) * rate + 1e-9)) + 1
+    grid = t[0] + np.arange(n) / rate
+    aa = rate < fs * (1 - 1e-9)
+    out = {"t": grid}
+    for k, v in run_cols.items():
+        if k == "t":
+            continue
+        x = np.asarray(v, dtype=float)
+        if aa:
+            x = lowpass(x, fs, cutoff=ANTI_ALIAS_FRACTION * rate)
+        out[k] = np.interp(grid, t, x)
+    return out, aa
+
+
+def _gain_drift(q: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[float, float, np.ndarray]:
+    """Least squares ``y ~ gain*q + b + drift*(t - t0)``: (gain, drift, fitted drift term)."""
+    tt = t - t[0]
+    a = np.column_stack([q, np.ones_like(q), tt])
+    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+    return float(coef[0]), float(coef[2]), coef[2] * tt
+
+
+def _render_meta(meta: dict[str, str], found: Mapping[str, str], source: str,
+                 missing: list[str] | None = None) -> dict[str, str]:
+    """Fill ``{key}`` templates from ``found``; an unknown key is an error, or, with ``missing``
+    given, a note in it and the key left out (a mapping's defaults must not stop an import)."""
+    out = {}
+    for k, v in meta.items():
+        if "{" in v:
+            try:
+                v = v.format_map(dict(found))
+            except KeyError as exc:
+                msg = f"metadata {k}={v!r} refers to {{{exc.args[0]}}}, which no header pattern found"
+                if missing is not None:
+                    missing.append(msg + f"; {k} left out")
+                    continue
+                raise DataError(f"{source}: {msg}") from None
+            except (ValueError, IndexError):
+                raise DataError(f"{source}: metadata {k}={v!r}: bad {{}} template (write {{{{ for a brace)") from None
+        out[k] = v
+    return out
+
+
+def _round(x: np.ndarray, decimals: int | None) -> np.ndarray:
+    if decimals is None:
+        return x
+    r = np.round(x, decimals)
+    return r + 0.0  # no "-0.0" in the file
+
+
+# --------------------------------------------------------------------------------------------
+# conversion
+# --------------------------------------------------------------------------------------------
+def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
+                 source: str = "<log>", readme: Sequence[str] = ()) -> Imported:
+    """Convert the text of one raw log (see :func:`convert`)."""
+    header, linenos, cols = _parse_table(text, mapping, source)
+    rows_read = linenos.size
+    cols, dropped = _time(cols, linenos, mapping, options.time_repair, source)
+    warnings: list[str] = []
+    if dropped:
+        warnings.append(f"dropped {dropped} rows whose time did not increase")
+    n = cols["t"].size
+    if n < 2:
+        raise DataError(f"{source}: only {n} data row(s); a run needs at least 2")
+    t_start = float(cols["t"][0])
+    cols["t"] = cols["t"] - t_start
+    steps = np.diff(cols["t"])
+    med = float(np.median(steps))
+    rate_in = 1.0 / med
+    irregular = bool(steps.max() > _IRREGULAR * med or steps.min() < med / _IRREGULAR)
+    if irregular and options.resample is None:
+        warnings.append(f"irregular sampling (steps {steps.min():.6g} .. {steps.max():.6g} s around "
+                        f"{med:.6g} s): --resample HZ puts it on a uniform grid")
+
+    flip = mapping.flip_output if options.flip_output is None else options.flip_output
+    knobs = sorted({int(k[1]) for k in cols if k[0] in "qyr" and len(k) == 2})
+    gains: dict[int, float | None] = {}
+    for k in knobs:
+        q, y = cols.get(f"q{k}"), cols.get(f"y{k}")
+        gains[k] = None
+        if q is not None and y is not None and np.ptp(q) > 0:
+            gains[k] = _gain_drift(q, y, cols["t"])[0]
+    if flip:
+        for name in list(cols):
+            if name[0] in "yr":
+                cols[name] = -cols[name]
+
+    anti_aliased = False
+    if options.resample is not None:
+        cols, anti_aliased = resample(cols, float(options.resample))
+        if cols["t"].size < 2:
+            raise DataError(f"{source}: resampling at {options.resample} Hz leaves fewer than 2 samples")
+
+    knob_reports = []
+    for k in knobs:
+        q, y = cols.get(f"q{k}"), cols.get(f"y{k}")
+        drift = None
+        if q is not None and y is not None and np.ptp(q) > 0:
+            _, drift, trend = _gain_drift(q, y, cols["t"])
+            if options.detrend:
+                cols[f"y{k}"] = y - trend
+                if f"r{k}" in cols:
+                    cols[f"r{k}"] = cols[f"r{k}"] - trend
+        zero: dict[str, float] = {}
+        if options.zero != "none":
+            for name in (f"q{k}", f"y{k}"):
+                if name in cols:
+                    v = cols[name]
+                    zero[name] = float(v[0] if options.zero == "first" else v.mean())
+                    cols[name] = v - zero[name]
+            if f"r{k}" in cols and f"y{k}" in zero:
+                cols[f"r{k}"] = cols[f"r{k}"] - zero[f"y{k}"]
+        g = gains[k]
+        if g is not None and (-g if flip else g) < 0:
+            warnings.append(f"knob {k}: the output falls as the input rises (gain {g:.3g}); the hysteresis "
+                            "model needs a rising output: use --flip-output")
+        knob_reports.append(KnobReport(k, g, bool(flip and (f"y{k}" in cols or f"r{k}" in cols)),
+                                       drift, bool(options.detrend and drift is not None), zero))
+
+    # the run's column order of DESIGN.md section 6, whatever the mapping's order
+    ordered = {name: _round(cols[name], options.decimals) for name in TARGETS if name in cols}
+    if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
+        raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
+                        f"({1.0 / (options.resample or rate_in):.3g} s)")
+
+    found: dict[str, str] = {}
+    for pat in mapping.meta_from_header:
+        hit = pat.search(header)
+        if not hit:
+            warnings.append(f"header pattern {pat.regex!r} matched no header line")
+        found.update(hit)
+    for pat in mapping.meta_from_readme:
+        hit = pat.search(readme)
+        if not hit and readme:
+            warnings.append(f"README pattern {pat.regex!r} matched nothing")
+        found.update(hit)
+    # precedence: --meta options > what the file says > the mapping's fixed values; the mapping's
+    # keys come first in the file (catheter, motion ... before the details)
+    meta = _render_meta(dict(mapping.meta), found, source, missing=warnings)
+    meta.update(found)
+    meta.update(_render_meta({str(k): str(v) for k, v in options.meta.items()}, found, source))
+    meta.setdefault("source_file", Path(source).name)
+    meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased)
+    run = Run(ordered, meta, source)
+
+    tt = run["t"]
+    report = ImportReport(
+        source=source, mapping=mapping.name, rows_read=int(rows_read), rows_dropped=int(dropped),
+        rows_out=len(run), rate_in=rate_in, rate_out=float(1.0 / np.median(np.diff(tt))),
+        irregular=irregular, duration=float(tt[-1] - tt[0]), t_start=t_start,
+        ranges={k: (float(v.min()), float(v.max())) for k, v in run.columns.items()},
+        knobs=tuple(knob_reports), resampled=options.resample is not None, anti_aliased=anti_aliased,
+        warnings=tuple(warnings),
+    )
+    return Imported(run, report)
+
+
+def _import_note(mapping: ImportMapping, flip: bool, options: ImportOptions, knobs: Sequence[KnobReport],
+                 dropped: int, anti_aliased: bool) -> str:
+    """One metadata line saying how the file was converted, so the run explains itself."""
+    parts = [f"mapping {mapping.name} ({' '.join(c.spec() for c in mapping.columns)})"]
+    parts.append("output flipped" if flip else "output as read")
+    zeros = [f"{name} {v:.6g}" for k in knobs for name, v in k.zero.items()]
+    parts.append(f"zero {options.zero}" + (f" ({', '.join(zeros)} subtracted)" if zeros else ""))
+    if options.resample is not None:
+        parts.append(f"resampled to {options.resample:g} Hz" + (" after an anti-alias low-pass" if anti_aliased else ""))
+    if options.detrend:
+        parts.append("output detrended")
+    if dropped:
+        parts.append(f"{dropped} non-increasing time rows dropped")
+    return "; ".join(parts)
+
+
+def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
+            source: str | None = None) -> Imported:
+    """Convert one raw log file (plain text or gzip) into a run.
+
+    Parameters
+    ----------
+    path : path-like
+        The raw log.
+    mapping : ImportMapping
+        How to read it (a preset, :func:`load_mapping` or :func:`parse_map_spec`).
+    options : ImportOptions
+        Conditioning: zero, flip, resample, detrend, time repair, rounding, extra metadata.
+    source : str, optional
+        Name used in messages and in ``source_file`` (default: the path).
+
+    Returns
+    -------
+    Imported
+        The run (columns in DESIGN.md order, metadata including ``import``: how it was made) and
+        the :class:`ImportReport`.
+
+    Raises
+    ------
+    DataError
+        Unreadable, empty, binary or corrupt gzip file; a mapped column beyond a row's fields; a
+        non-numeric or non-finite cell; non-increasing time (unless repaired); a metadata template
+        naming a key nothing provided. The message names the file and the line.
+    """
+    p = Path(path)
+    name = str(path) if source is None else source
+    text = read_text(p)
+    readme = _readme_lines(p) if mapping.meta_from_readme else []
+    return convert_text(text, mapping, options, source=name, readme=readme)
+
+
+def output_name(path: str | os.PathLike) -> str:
+    """Run CSV name for a raw file: ``00.TXT.gz`` -> ``00.csv``."""
+    name = Path(path).name
+    if name.lower().endswith(".gz"):
+        name = name[:-3]
+    stem = name.rsplit(".", 1)[0] if "." in name.lstrip(".") else name
+    return stem + ".csv"
