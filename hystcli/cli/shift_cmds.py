@@ -1,0 +1,171 @@
+"""`hyst detect-shift`: Algorithm 1 on a recorded replay (``--replay``) or a live robot (``--port``).
+
+Parses the options, opens one probe per knob (a :class:`hystcli.shift.ReplayProbe` over the
+replay, or ``hystcli.device.open_probe`` on the serial port), calls
+:func:`hystcli.shift.detect_shift` per knob, renders the offsets, and writes the shifted model
+(:func:`hystcli.shift.apply_shift`) atomically. Nothing is written unless every knob succeeded.
+"""
+from __future__ import annotations
+
+import contextlib
+import importlib.util
+import math
+from pathlib import Path
+from typing import Annotated, Any, Iterator, Optional
+
+import typer
+
+from .. import shift as shift_mod
+from ..errors import DataError, HystError
+from ..io import check_not_input, file_sha256, load_model, read_run, save_model
+from ..model import Model
+from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
+                  command, echo_json, info)
+
+
+@contextlib.contextmanager
+def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
+            baud: int) -> Iterator[tuple[dict[int, Any], Any]]:
+    """Yield ``({knob: probe}, run or None)``; live probes are closed on the way out."""
+    if replay is not None:
+        run = read_run(replay)
+        if knobs is None:
+            knobs = [k for k in model.knobs if f"q{k}" in run]
+            if not knobs:
+                raise DataError(f"{replay}: the replay records none of the model's knobs "
+                                f"(no column {' or '.join(f'q{k}' for k in model.knobs)})")
+        for k in knobs:
+            model.knob(k)
+        yield {k: shift_mod.ReplayProbe(run, k) for k in knobs}, run
+        return
+    if importlib.util.find_spec("hystcli.device") is None:
+        raise HystError("live detection needs the device driver (hystcli.device), which this "
+                        "install does not have; use --replay RUN.csv")
+    from .. import device
+
+    knobs = list(model.knobs) if knobs is None else knobs
+    for k in knobs:
+        model.knob(k)
+    with contextlib.ExitStack() as stack:
+        probes = {}
+        for k in knobs:
+            probe = device.open_probe(port, baud, k)
+            dev = getattr(probe, "device", None)
+            if dev is not None and hasattr(dev, "close"):
+                stack.callback(dev.close)
+            probes[k] = probe
+        yield probes, None
+
+
+def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
+    head = f"{'knob':>4}  {'offset':>8}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  {'travel':>7}  {'steps':>5}  notes"
+    lines = [head, "-" * len(head)]
+    for k, r in results.items():
+        notes = []
+        if r.start_outside:
+            notes.append("started outside the dead zone")
+        if r.contacts:
+            notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
+        edge = f"{r.edge} {r.edge_found_at:+.2f}"
+        lines.append(f"{k:>4}  {r.offset:>+8.2f}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  "
+                     f"{r.travel:>7.1f}  {r.steps:>5}  {'; '.join(notes)}")
+    lines.append(f"(deg; offset = edge - D of the straight-shaft model; shifted model written to {output})")
+    return "\n".join(lines)
+
+
+@command(
+    "detect-shift",
+    help=(
+        "Detect the hysteresis shift of each knob after the shaft took a new shape, by the "
+        "slope of the motor current (Algorithm 1 of the paper), and write the shifted model.\n\n"
+        "The knob is stepped by --step degrees; the slope dC/dq over the last steps tells when "
+        "a tendon becomes taut (>= eps_lower: a dead-zone edge; offset = q - D_pos moving +, "
+        "q - D_neg moving -) or the tip meets a wall (>= eps_upper: reverse and find the other "
+        "edge). A start with a tendon already taut is handled by moving toward the dead zone. "
+        "Thresholds come from the model's identification unless given. The search never exceeds "
+        "--max-steps / --max-travel and returns the knob to where it began.\n\n"
+        "--replay walks a run recorded under the new shape (a slow sweep or ramp from the rest "
+        "position) as if the knob were stepped; --port runs it live on the robot.\n\n"
+        "Example:\n\n"
+        "    hyst detect-shift --model model.json --replay bent.csv -o shifted.json --plot fig5b.png"
+    ),
+)
+def detect_shift_cmd(
+    model_path: ModelOpt,
+    output: OutOpt,
+    replay: Annotated[Optional[Path], typer.Option(
+        "--replay", help="Run CSV recorded under the new shape (columns t, q<k>, c<k>).")] = None,
+    port: PortOpt = None,
+    baud: BaudOpt = 115200,
+    knob: Annotated[Optional[int], typer.Option(
+        "--knob", min=1, max=2, help="Search this knob only (default: every knob of the model the source has).")] = None,
+    eps_lower: Annotated[Optional[float], typer.Option(
+        "--eps-lower", help="eps_lower, mA/deg (default: from the model's identification).")] = None,
+    eps_upper: Annotated[Optional[float], typer.Option(
+        "--eps-upper", help="eps_upper (contact), mA/deg (default: from the model's identification).")] = None,
+    current_dead_zone: Annotated[Optional[float], typer.Option(
+        "--current-dead-zone", help="Motor current with no tendon taut, mA (default: from the model).")] = None,
+    step: Annotated[float, typer.Option("--step", help="Unit step u, deg.")] = 0.5,
+    max_steps: Annotated[Optional[int], typer.Option(
+        "--max-steps", help="Step limit (default: max-travel / step).")] = None,
+    max_travel: Annotated[float, typer.Option("--max-travel", help="Knob travel limit of the search, deg.")] = 25.0,
+    plot: PlotOpt = None,
+    fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
+) -> None:
+    if (replay is None) == (port is None):
+        raise typer.BadParameter("give exactly one of --replay RUN.csv or --port PORT", param_hint="--replay / --port")
+    if fmt not in (OutputFormat.table, OutputFormat.json):
+        raise typer.BadParameter("detect-shift prints table or json", param_hint="--format")
+    for name, v in (("--step", step), ("--max-travel", max_travel)):
+        if not (math.isfinite(v) and v > 0):
+            raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
+    if max_steps is not None and max_steps < 1:
+        raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
+    inputs = [model_path] + ([replay] if replay is not None else [])
+    # refuse a bad output before anything moves
+    check_not_input(output, inputs)
+    if plot is not None:
+        check_not_input(plot, inputs)
+        if plot.resolve() == output.resolve():
+            raise typer.BadParameter("the plot and the output must be different files", param_hint="--plot")
+    for target in [output] + ([plot] if plot is not None else []):
+        folder = target.parent if str(target.parent) else Path(".")
+        if not folder.is_dir():
+            raise DataError(f"{target}: the folder {folder} does not exist")
+
+    model = load_model(model_path)
+    knobs = None if knob is None else [knob]
+    options = dict(eps_lower=eps_lower, eps_upper=eps_upper, current_dead_zone=current_dead_zone,
+                   step=step, max_steps=max_steps, max_travel=max_travel)
+    results: dict[int, shift_mod.ShiftResult] = {}
+    with _probes(model, knobs, replay, port, baud) as (probes, run):
+        for k, probe in probes.items():
+            progress = None
+            if port is not None and not quiet:
+                def progress(s, w, k=k):  # noqa: ANN001 - live progress on stderr
+                    slope = "" if math.isnan(w) else f", slope {w:.2f} mA/deg"
+                    info(f"knob {k}: q {s.q:+.2f} deg, current {s.current:.1f} mA{slope}")
+            info(f"knob {k}: searching the dead-zone edge ...", quiet)
+            results[k] = shift_mod.detect_shift(model, probe, k, progress=progress, **options)
+
+    shifted = shift_mod.apply_shift(model, results)
+    meta = dict(shifted.meta)
+    if replay is not None:
+        meta["shift_source"] = replay.name
+        meta["shift_sha256"] = file_sha256(replay)
+    else:
+        meta["shift_source"] = f"live:{port}"
+    shifted = Model(shifted.knobs, shifted.geometry, shifted.effects, meta, shifted.identification)
+    if plot is not None:
+        background = None
+        if run is not None:
+            background = {k: (run[f"q{k}"], run[f"c{k}"]) for k in results}
+        shift_mod.plot_shift(list(results.values()), plot, model=model, background=background,
+                             inputs=inputs)
+    save_model(output, shifted, inputs=inputs)
+    if fmt == OutputFormat.json:
+        echo_json({"knobs": {str(k): r.to_dict() for k, r in results.items()},
+                   "output": str(output), "plot": None if plot is None else str(plot)})
+    elif not quiet:
+        typer.echo(_table(results, output))

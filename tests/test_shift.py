@@ -1,0 +1,336 @@
+"""Algorithm 1 (hystcli.shift): accuracy on the twin, the replay probe, contact, a start outside
+the dead zone, limits, and the return of the knob on every failure.
+
+Reference values: the twin's true shift (paper eqs. 3-4, ``run.meta["true_offset<k>"]``), and
+edges placed by hand in the function probes below.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hystcli import twin
+from hystcli.errors import DataError, LinkError, ShiftDetectionError
+from hystcli.io import Run
+from hystcli.model import Geometry, KnobIdentification, KnobModel, Model, Shape
+from hystcli.shift import (ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult, apply_shift,
+                           detect_shift, plot_shift, resolve_thresholds)
+
+# A catheter of the twin fixed here (DESIGN.md section 6's example knob and a second knob like
+# it), so these tests do not move when the shared virtual catheters are recalibrated.
+CURRENT = twin.CurrentParams()  # no_load 120 mA, coulomb 6 mA, k_load 4 mA/deg, mu 0.25, noise 3 mA
+CATHETER = twin.VirtualCatheter(
+    "test-cath",
+    {1: KnobModel(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2),
+     2: KnobModel(d_pos=8.4, d_neg=-9.3, b_pos=5.6, b_neg=6.4, omega=1.40, h_pos=-3.6, h_neg=3.9)},
+    Geometry(beta_catheter_mm=1.2, beta_knob_mm=8.0), CURRENT)
+
+
+def ident(cur: twin.CurrentParams = CURRENT) -> dict[int, KnobIdentification]:
+    """What identification would store, from the twin's known current model: the loaded slope
+    lies between k_load(1-mu) and k_load(1+mu); the dead zone is flat up to noise."""
+    return {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cur.k_load, q_min=-40.0,
+                                  q_max=40.0, current_dead_zone=cur.no_load) for k in (1, 2)}
+
+
+MODEL = Model(dict(CATHETER.knobs), CATHETER.geometry, identification=ident())
+
+
+def slow_ramp(amplitude: float = 26.0, speed: float = 1.0, fs: float = 500.0):
+    """What a lab records for the search: from rest at 0, slowly out to +A and over to -A."""
+    pts = [0.0, amplitude, -amplitude]
+    path = np.concatenate([[0.0], np.cumsum(np.abs(np.diff(pts)))])
+    t = np.arange(int(round(path[-1] / speed * fs)) + 1) / fs
+    return t, np.interp(t * speed, path, pts)
+
+
+# --------------------------------------------------------------------------------------------
+# Must-show 2 of issue 3: the grid of shapes on the twin without effects
+# --------------------------------------------------------------------------------------------
+def test_offset_within_half_degree_over_the_shape_grid():
+    t, q = slow_ramp()
+    worst = 0.0
+    seed = 0
+    for alpha in (0, 45, 90, 135):
+        for theta in (0, 90, 180, 270):
+            seed += 1
+            shape = Shape.parse(f"alpha={alpha},theta={theta}")
+            run = twin.simulate(CATHETER, t, {1: q, 2: q}, shape=shape, effects=(), seed=seed)
+            for k in (1, 2):
+                true = float(run.meta[f"true_offset{k}"])
+                # the reference itself, from paper eqs. 3-4 by hand: 1.2/8 mm * alpha(rad) * trig
+                by_hand = math.degrees(1.2 / 8.0 * math.radians(alpha)) * (
+                    math.cos(math.radians(theta)) if k == 1 else math.sin(math.radians(theta)))
+                assert true == pytest.approx(by_hand, abs=1e-5)
+                r = detect_shift(MODEL, ReplayProbe(run, k), k)
+                err = abs(r.offset - true)
+                worst = max(worst, err)
+                assert err < 0.5, (shape, k, r.offset, true)
+                assert r.travel <= 25.0
+                assert r.d_pos == pytest.approx(CATHETER.knobs[k].d_pos + r.offset)
+                assert r.d_neg == pytest.approx(CATHETER.knobs[k].d_neg + r.offset)
+    assert worst > 0  # noise was on
+
+
+def test_start_outside_is_recognised_on_the_twin():
+    # alpha=90: shift 13.5 deg. theta=0 puts the new dead zone at [4.8, 22.6]: at q=0 the
+    # negative tendon is taut; theta=180 puts it at [-22.2, -4.4]: the positive one is.
+    t, q = slow_ramp()
+    for theta, edge in ((0, "neg"), (180, "pos")):
+        run = twin.simulate(CATHETER, t, {1: q}, shape=Shape.parse(f"alpha=90,theta={theta}"),
+                            effects=(), seed=7)
+        r = detect_shift(MODEL, ReplayProbe(run, 1), 1)
+        assert r.start_outside and r.transition == "fall" and r.edge == edge
+        assert r.offset == pytest.approx(float(run.meta["true_offset1"]), abs=0.5)
+
+
+# --------------------------------------------------------------------------------------------
+# the replay probe
+# --------------------------------------------------------------------------------------------
+def _tiny_run(**extra) -> Run:
+    cols = {"t": np.arange(7.0), "q1": np.array([0, 1, 2, 3, 2, 1, 0.0]),
+            "c1": np.array([10, 11, 12, 13, 14, 15, 16.0])}
+    cols.update(extra)
+    return Run(cols, {}, "tiny.csv")
+
+
+def test_replay_probe_walks_the_record_forward_only():
+    p = ReplayProbe(_tiny_run(), 1, average=False)
+    assert p.position() == 0.0
+    s = p.step_to(0.5)
+    assert (s.q, s.current) == (0.5, 10.5)           # halfway between samples 0 and 1
+    assert p.step_to(2.5).current == 12.5
+    # going back: the record goes on up to 3 and comes down; q=1.5 is met between q=2 (c=14)
+    # and q=1 (c=15)
+    s = p.step_to(1.5)
+    assert (s.q, s.current) == (1.5, 14.5)
+    assert p.recorded_travel == pytest.approx(2.5 + 0.5 + 1.5)
+    with pytest.raises(ReplayExhausted, match="ends before knob 1 reaches 2.50 deg"):
+        p.step_to(2.5)                                # the record never rises again
+
+
+def test_replay_probe_average_sits_on_a_linear_current():
+    # c = 2 q + 5 exactly: the mean over a step and its mean angle lie on the same line
+    t = np.arange(2001) / 100.0
+    q = 0.5 * t
+    run = Run({"t": t, "q1": q, "c1": 2 * q + 5}, {}, None)
+    p = ReplayProbe(run, 1)
+    for target in (0.5, 1.0, 1.5):
+        s = p.step_to(target)
+        assert target - 0.5 < s.q < target
+        assert s.current == pytest.approx(2 * s.q + 5, abs=1e-9)
+
+
+def test_replay_probe_names_a_missing_column():
+    run = Run({"t": np.arange(3.0), "q1": np.arange(3.0)}, {}, "r.csv")
+    with pytest.raises(DataError, match="r.csv.*'c1'"):
+        ReplayProbe(run, 1)
+    with pytest.raises(DataError, match="'q2'"):
+        ReplayProbe(_tiny_run(), 2)
+
+
+def test_replay_that_never_leaves_the_dead_zone_is_an_error_not_an_offset():
+    t, q = slow_ramp(amplitude=5.0)
+    run = twin.simulate(CATHETER, t, {1: q}, effects=(), seed=3)   # straight: dead zone [-8.7, 9.1]
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within \d+ steps / [\d.]+ deg"):
+        detect_shift(MODEL, ReplayProbe(run, 1), 1)
+
+
+# --------------------------------------------------------------------------------------------
+# a probe over a current law written by hand (edges known exactly)
+# --------------------------------------------------------------------------------------------
+class LawProbe:
+    """Signed motor current of DESIGN.md section 4 with edges ``[dn, dp]``, an optional wall,
+    Coulomb friction by direction, and seeded noise."""
+
+    def __init__(self, dn, dp, start=0.0, wall=None, noise=0.3, seed=0, fail_at=None,
+                 interrupt_at=None):
+        self.dn, self.dp, self.wall = dn, dp, wall
+        self.q = start
+        self.rng = np.random.default_rng(seed)
+        self.noise = noise
+        self.moves: list[float] = []
+        self.stopped = False
+        self.fail_at, self.interrupt_at = fail_at, interrupt_at
+
+    def current(self, q, d):
+        c = 120.0 + 6.0 * d + 4.0 * (max(q - self.dp, 0.0) - max(self.dn - q, 0.0))
+        if self.wall is not None:
+            c += 100.0 * max(q - self.wall, 0.0)
+        return c + self.rng.normal(0.0, self.noise)
+
+    def position(self):
+        return self.q
+
+    def step_to(self, q):
+        if self.fail_at is not None and len(self.moves) == self.fail_at:
+            self.fail_at = None
+            raise LinkError("no reply from the device within 1 s")
+        if self.interrupt_at is not None and len(self.moves) == self.interrupt_at:
+            self.interrupt_at = None
+            raise KeyboardInterrupt
+        d = 1.0 if q > self.q else -1.0
+        self.q = q
+        self.moves.append(q)
+        return ProbeSample(q, self.current(q, d))
+
+    def stop(self):
+        self.stopped = True
+
+
+STRAIGHT = KnobModel(d_pos=9.0, d_neg=-5.0, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
+LAW_MODEL = Model({1: STRAIGHT}, identification={1: KnobIdentification(0.5, 4.0, -40, 40, current_dead_zone=120.0)})
+
+
+def test_paper_case_rise_at_the_positive_edge():
+    # true dead zone [-6, 8]: the straight one [-5, 9] shifted by -1
+    p = LawProbe(-6.0, 8.0)
+    r = detect_shift(LAW_MODEL, p, 1)
+    assert (r.edge, r.transition, r.direction) == ("pos", "rise", 1)
+    assert r.offset == pytest.approx(-1.0, abs=0.1)
+    assert r.d_pos == pytest.approx(8.0, abs=0.1) and r.d_neg == pytest.approx(-6.0, abs=0.1)
+    assert p.q == 0.0 and r.returned                 # knob back where it began
+    assert r.steps == len(r.trace) and r.travel == pytest.approx(0.5 * r.steps)
+
+
+def test_contact_reverses_and_finds_the_other_edge():
+    # a wall at +4 deg inside the dead zone [-6, 8]: the slope jumps past eps_upper (20 mA/deg),
+    # the search turns and takes the negative edge (paper, Discussion)
+    p = LawProbe(-6.0, 8.0, wall=4.0, seed=1)
+    r = detect_shift(LAW_MODEL, p, 1)
+    assert len(r.contacts) == 1 and 4.0 < r.contacts[0] <= 5.0
+    assert (r.edge, r.direction) == ("neg", -1)
+    assert r.offset == pytest.approx(-1.0, abs=0.1)
+    assert max(p.moves) <= 5.0                        # never pressed more than a step into the wall
+    assert p.q == 0.0
+
+
+def test_contact_on_both_sides_is_an_error():
+    class Walled(LawProbe):
+        def current(self, q, d):
+            return 120.0 + 6.0 * d + 100.0 * (max(q - 3.0, 0.0) - max(-3.0 - q, 0.0))
+
+    p = Walled(-20.0, 20.0)
+    with pytest.raises(ShiftDetectionError, match="contact in both directions.*returned to 0"):
+        detect_shift(LAW_MODEL, p, 1)
+    assert p.q == 0.0
+
+
+@pytest.mark.parametrize("dn,edge", [
+    (3.0, "neg"),      # negative tendon taut at 0 (16 mA): move + and take where it goes slack
+    (-17.0, "pos"),    # positive tendon taut (the level says so): turn and move -
+    (1.0, None),       # barely taut (4 mA, below the Coulomb friction): the level cannot tell;
+    (-15.0, None),     # either edge is fine, the offset must be right
+])
+def test_start_outside_the_dead_zone(dn, edge):
+    dp = dn + (STRAIGHT.d_pos - STRAIGHT.d_neg)      # the straight width, shifted
+    offset = dn - STRAIGHT.d_neg
+    p = LawProbe(dn, dp, seed=2)
+    r = detect_shift(LAW_MODEL, p, 1)
+    if edge is not None:
+        assert (r.edge, r.transition, r.start_outside) == (edge, "fall", True)
+        assert r.edge_found_at == pytest.approx(dn if edge == "neg" else dp, abs=0.15)
+    assert r.offset == pytest.approx(offset, abs=0.15)
+    assert r.travel <= 25.0 and p.q == 0.0
+
+
+def test_start_outside_without_a_dead_zone_level_says_which_option():
+    model = Model({1: STRAIGHT}, identification={1: KnobIdentification(0.5, 4.0, -40, 40)})
+    with pytest.raises(ShiftDetectionError, match="--current-dead-zone"):
+        detect_shift(model, LawProbe(8.0, 22.0), 1)       # taut over the whole first window
+    r = detect_shift(model, LawProbe(8.0, 22.0), 1, current_dead_zone=120.0)
+    assert r.edge_found_at == pytest.approx(8.0, abs=0.15)
+
+
+def test_travel_and_step_limits_are_never_exceeded():
+    p = LawProbe(-40.0, 40.0)
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within 20 steps / 10.0 deg.*travel limit"):
+        detect_shift(LAW_MODEL, p, 1, max_travel=10.0)
+    assert max(abs(m) for m in p.moves[:-1]) <= 10.0 and p.q == 0.0
+    p = LawProbe(-40.0, 40.0)
+    with pytest.raises(ShiftDetectionError, match=r"within 7 steps.*step limit is 7"):
+        detect_shift(LAW_MODEL, p, 1, max_steps=7)
+    assert len(p.moves) == 7 + 1                      # seven steps, then the return
+
+
+def test_a_fault_stops_and_returns_the_knob_and_says_so():
+    p = LawProbe(-6.0, 8.0, fail_at=5)
+    with pytest.raises(LinkError, match="no reply.*returned to 0 deg"):
+        detect_shift(LAW_MODEL, p, 1)
+    assert p.stopped and p.q == 0.0
+
+
+def test_an_interrupt_returns_the_knob_and_is_re_raised():
+    p = LawProbe(-6.0, 8.0, interrupt_at=3)
+    with pytest.raises(KeyboardInterrupt) as info:
+        detect_shift(LAW_MODEL, p, 1)
+    assert p.q == 0.0 and any("returned to 0" in n for n in info.value.__notes__)
+
+
+def test_a_probe_that_cannot_return_is_reported():
+    class Stuck(LawProbe):
+        def return_to_start(self):
+            return False
+
+    with pytest.raises(LinkError, match="could NOT be confirmed back at 0 deg"):
+        detect_shift(LAW_MODEL, Stuck(-6.0, 8.0, fail_at=2), 1)
+
+
+# --------------------------------------------------------------------------------------------
+# thresholds, apply, plot
+# --------------------------------------------------------------------------------------------
+def test_thresholds_come_from_the_model_or_the_options():
+    th = resolve_thresholds(LAW_MODEL, 1)
+    assert th.eps_lower == pytest.approx(math.sqrt(0.5 * 4.0))   # KnobIdentification.eps_lower
+    assert th.eps_upper == pytest.approx(20.0) and th.current_dead_zone == 120.0
+    assert resolve_thresholds(LAW_MODEL, 1, eps_lower=2.0).eps_lower == 2.0
+    bare = Model({1: STRAIGHT})
+    with pytest.raises(ShiftDetectionError, match="give --eps-lower and --eps-upper"):
+        resolve_thresholds(bare, 1)
+    with pytest.raises(ShiftDetectionError, match="give --eps-upper"):
+        resolve_thresholds(bare, 1, eps_lower=1.0)
+    with pytest.raises(ShiftDetectionError, match="greater than eps_lower"):
+        resolve_thresholds(bare, 1, eps_lower=3.0, eps_upper=2.0)
+    r = detect_shift(bare, LawProbe(-6.0, 8.0), 1, eps_lower=1.5, eps_upper=20.0)
+    assert r.offset == pytest.approx(-1.0, abs=0.1)
+
+
+def test_apply_shift_sets_offsets_and_shifted_edges():
+    model = MODEL
+    res = ShiftResult(knob=2, offset=3.25, d_pos=0, d_neg=0, edge="pos", edge_found_at=0,
+                      direction=1, transition="rise", start=0, travel=0, steps=0)
+    shifted = apply_shift(model, [res])
+    assert shifted.knob(2).offset == 3.25 and shifted.knob(1).offset == 0.0
+    assert shifted.knob(2).shifted_d_pos == pytest.approx(8.4 + 3.25)
+    assert shifted.knob(2).shifted_d_neg == pytest.approx(-9.3 + 3.25)
+    assert shifted.knob(2).b_pos == model.knob(2).b_pos
+
+
+def test_plot_shift_writes_a_png_and_never_over_an_input(tmp_path):
+    r = detect_shift(LAW_MODEL, LawProbe(-6.0, 8.0, wall=4.0), 1)
+    out = tmp_path / "fig.png"
+    plot_shift([r], out, model=LAW_MODEL)
+    assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    src = tmp_path / "in.csv"
+    src.write_text("t\n0\n")
+    with pytest.raises(DataError, match="refusing to overwrite"):
+        plot_shift([r], src, inputs=[src])
+    assert src.read_text() == "t\n0\n"
+
+
+def test_end_to_end_with_the_model_identify_makes():
+    # identify on the straight sweep of the paper's protocol, then detect on bent shafts: the
+    # thresholds and the dead-zone level are the identified ones, nothing is given by hand
+    from hystcli.identify import identify
+
+    t, q = twin.sweep()
+    model = identify(twin.simulate(CATHETER, t, {1: q, 2: q}, effects=(), seed=11)).model
+    assert set(model.identification) == {1, 2}
+    t, q = slow_ramp()
+    for shape in ("alpha=90,theta=0", "alpha=135,theta=200", "alpha=45,theta=120"):
+        run = twin.simulate(CATHETER, t, {1: q, 2: q}, shape=Shape.parse(shape), effects=(), seed=5)
+        for k in (1, 2):
+            r = detect_shift(model, ReplayProbe(run, k), k)
+            assert r.offset == pytest.approx(float(run.meta[f"true_offset{k}"]), abs=0.5), (shape, k)
