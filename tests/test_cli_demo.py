@@ -1,0 +1,67 @@
+"""`hyst demo` on the command line: output, files, bad input."""
+from __future__ import annotations
+
+import json
+
+from typer.testing import CliRunner
+
+from hystcli.cli import app
+
+runner = CliRunner()
+
+
+def test_missing_data_dir_is_one_error_line_and_writes_nothing(tmp_path, monkeypatch):
+    monkeypatch.chdir(tmp_path)  # no sample_data/ here
+    res = runner.invoke(app, ["demo", "--out", "out"])
+    assert res.exit_code == 1
+    lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("Error: sample_data: no such data directory")
+    assert "Traceback" not in res.output
+    assert not (tmp_path / "out").exists()
+
+
+def test_out_that_is_a_file_is_an_error(tmp_path):
+    target = tmp_path / "file.txt"
+    target.write_text("keep me")
+    res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--out", str(target)])
+    assert res.exit_code == 1
+    assert res.stderr.startswith("Error: ") and "not a directory" in res.stderr
+    assert target.read_text() == "keep me"
+
+
+def test_usage_error_exits_2(tmp_path):
+    res = runner.invoke(app, ["demo", "--trials", "0", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    res = runner.invoke(app, ["demo", "--format", "latex", "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+
+
+def test_demo_json_and_files(tmp_path):
+    out = tmp_path / "o"
+    res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--format", "json", "--out", str(out),
+                              "--no-figures", "--quiet"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["format"] == "hyst-demo" and data["config"]["trials"] == 1
+    assert [c["controller"] for c in data["table_II"]] == ["none", "comp", "comp+shift"]
+    cell = data["table_I"][0]
+    assert cell["paper"]["source"] == "Kim & Mansi, Table I"
+    assert cell["ratio"]["ptpe"] == cell["ptpe"]["mean"] / cell["paper"]["ptpe"]["mean"]
+    # stdout and the results file are the same JSON; no figure asked for
+    assert json.loads((out / "results.json").read_text()) == data
+    assert sorted(p.name for p in out.iterdir()) == ["results.json", "tables.md"]
+    assert res.stderr == ""  # --quiet
+
+
+def test_demo_markdown_shows_paper_beside_ours(tmp_path):
+    res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--format", "markdown",
+                              "--out", str(tmp_path / "o"), "--no-figures"])
+    assert res.exit_code == 0, res.output
+    text = res.stdout
+    assert "**Table I: PTPE and RMSE for 1-DoF, periodic inputs**" in text
+    assert "**Table II" in text
+    # the paper's No Compensation straight cell, Kim & Mansi Table I: (57.2, 4.2) and (18.5, 3.4)
+    row = next(ln for ln in text.splitlines() if ln.startswith("| No Compensation | straight |"))
+    assert "(57.2, 4.2)" in row and "(18.5, 3.4)" in row
+    assert "paper values matched within 30%" in text
+    assert "demo took" in res.stderr

@@ -1,0 +1,160 @@
+"""The protocol runner behind `hyst demo` (hystcli/experiment.py) and the calibrated catheters."""
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+from pathlib import Path
+
+import pytest
+
+from hystcli import experiment as ex
+from hystcli.calibration import CALIBRATED_NAMES, DEFAULT_EFFECTS, calibrated_catheter
+from hystcli.errors import DataError
+from hystcli.model import Shape
+
+ROOT = Path(__file__).resolve().parent.parent
+SAMPLE = ROOT / "sample_data"
+
+
+@pytest.fixture(scope="module")
+def small():
+    # 1 catheter, 1 trial, every scenario: 2 knobs x (2 + 3 + 3) 1-DoF runs + 3 2-DoF runs = 19
+    return ex.run_protocol(catheters=("ice-a",), trials=1, seed=0)
+
+
+def test_reduced_protocol_has_the_tables_structure(small):
+    t1, t2 = small.table("I"), small.table("II")
+    # Table I: none and comp at the straight shaft (comp+shift is the paper's "-"), all three
+    # controllers at 45 and 90 deg; Table II: the three controllers.
+    assert sorted((c.scenario, c.controller) for c in t1) == sorted(
+        [("straight", "none"), ("straight", "comp")]
+        + [(s, c) for s in ("alpha=45", "alpha=90") for c in ("none", "comp", "comp+shift")])
+    assert [c.controller for c in t2] == ["none", "comp", "comp+shift"]
+    # 1-DoF cells pool 1 catheter x 2 knobs x 1 trial; the 2-DoF run has both knobs in it
+    assert all(c.n == 2 for c in t1 + t2)
+    for c in t1 + t2:
+        assert c.paper_ptpe is not None and c.paper_rmse is not None
+        assert c.ratio("ptpe") == pytest.approx(c.ptpe[0] / c.paper_ptpe[0])
+        assert c.ratio("rmse") == pytest.approx(c.rmse[0] / c.paper_rmse[0])
+        assert c.ptpe[0] > c.rmse[0] > 0  # PTPE of a zero-mean-ish error exceeds its RMSE
+    assert len(small.runs) == 19
+    # one detection per (scenario, knob)
+    assert len(small.shifts) == 4 * 2
+
+
+def test_compensation_with_shift_beats_compensation_only_on_bent_shapes(small):
+    for scen in ("alpha=45", "alpha=90", ex.SCENARIO_2DOF):
+        shift, only = small.cell("comp+shift", scen), small.cell("comp", scen)
+        assert shift.rmse[0] < 0.7 * only.rmse[0], scen
+        assert shift.ptpe[0] < only.ptpe[0], scen
+        assert shift.improvement["comp"]["rmse"] == pytest.approx(
+            (only.rmse[0] - shift.rmse[0]) / only.rmse[0] * 100)
+
+
+def test_detected_shift_is_near_the_geometry_of_the_shape(small):
+    cat = calibrated_catheter("ice-a")
+    ratio = cat.geometry.beta_catheter_mm / cat.geometry.beta_knob_mm
+    for row in small.shifts:
+        shape = Shape.parse(row.shape)
+        # paper eqs. 3-4 by hand: (180/pi) * beta_c * sum alpha_i[rad] cos/sin(theta_i) / beta_k
+        cos_sin = math.cos if row.knob == 1 else math.sin
+        expected = ratio * sum(s.alpha * cos_sin(math.radians(s.theta)) for s in shape.segments)
+        assert row.true_offset == pytest.approx(expected, abs=1e-5)
+        # the calibrated twin has unmodelled effects (rate lag biases the current's edges a little)
+        assert abs(row.result.offset - expected) < 2.5, row.to_dict()
+        assert row.result.travel <= ex.DETECT_MAX_TRAVEL
+
+
+def test_same_seed_same_bytes_other_seed_other_noise():
+    a = ex.run_protocol(catheters=("ice-b",), trials=2, seed=7, scenarios=["alpha=45"])
+    b = ex.run_protocol(catheters=("ice-b",), trials=2, seed=7, scenarios=["alpha=45"])
+    c = ex.run_protocol(catheters=("ice-b",), trials=2, seed=8, scenarios=["alpha=45"])
+    assert a.to_json() == b.to_json()
+    assert a.to_json() != c.to_json()
+    # the trials differ by their noise: a non-zero spread over the 2 knobs x 2 trials
+    assert all(cell.rmse[1] is not None and cell.rmse[1] > 0 for cell in a.cells)
+
+
+def test_paper_constants_are_consistent_with_the_papers_improvement_rates():
+    # Kim & Mansi give the improvement rate (base - new) / base * 100 of Compensation+Shift;
+    # recomputing it from the transcribed means checks the transcription. Table II's PTPE rate
+    # against No Compensation (45.8) does not follow from its own means ((55.6-25.1)/55.6 = 54.9):
+    # an inconsistency of the paper, left out.
+    papers = {**ex.PAPER_TABLE_I, **ex.PAPER_TABLE_II}
+    for scen, rates in ex.PAPER_IMPROVEMENT.items():
+        for metric, (vs_none, vs_comp) in rates.items():
+            new = papers[("comp+shift", scen)][metric][0]
+            for base_ctrl, rate in (("none", vs_none), ("comp", vs_comp)):
+                if scen == ex.SCENARIO_2DOF and metric == "ptpe" and base_ctrl == "none":
+                    continue
+                base = papers[(base_ctrl, scen)][metric][0]
+                assert (base - new) / base * 100 == pytest.approx(rate, abs=0.7), (scen, metric, base_ctrl)
+
+
+def test_bad_input_is_a_data_error(tmp_path):
+    with pytest.raises(DataError, match="no such data directory"):
+        ex.run_protocol(data_dir=tmp_path / "missing")
+    with pytest.raises(DataError, match="missing from the data directory"):
+        ex.run_protocol(data_dir=tmp_path)  # exists, but empty
+    with pytest.raises(DataError, match="trials"):
+        ex.run_protocol(trials=0)
+    with pytest.raises(DataError, match="unknown scenario"):
+        ex.run_protocol(scenarios=["alpha=30"])
+
+
+def test_write_outputs(tmp_path, small):
+    written = ex.write_outputs(small, tmp_path / "out")
+    names = sorted(p.name for p in written)
+    assert names == ["fig6_periodic_1dof.png", "fig7_nonperiodic_2dof.png", "results.json", "tables.md"]
+    data = json.loads((tmp_path / "out" / "results.json").read_text())
+    assert data["format"] == "hyst-demo"
+    assert len(data["table_I"]) == 8 and len(data["table_II"]) == 3
+    assert (tmp_path / "out" / "fig6_periodic_1dof.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    with pytest.raises(DataError, match="not a directory"):
+        ex.write_outputs(small, tmp_path / "out" / "results.json")
+
+
+def test_calibrated_catheters_have_physical_effects_only():
+    names = {e.name for e in DEFAULT_EFFECTS}
+    assert names <= {"creep", "friction", "rate", "coupling", "deadzone", "saturation", "latency"}
+    assert "contact" not in names  # a wall is a safety case, not a default of the catheter
+    for name in CALIBRATED_NAMES:
+        cat = calibrated_catheter(name)
+        assert {e.name for e in cat.default_effects} == names
+        for kn in cat.knobs.values():
+            # the paper: "the dead zone value is less than 20 deg" (section IV)
+            assert kn.d_pos < 20 and kn.d_neg > -20
+            # the tip moves only while a tendon is taut: dhat_pos = d_neg, dhat_neg = d_pos
+            # when b_pos = b_neg (paper eq. D_hats with H_neg - H_pos = omega * B)
+            assert kn.h_neg - kn.h_pos == pytest.approx(kn.omega * (kn.b_pos + kn.b_neg) / 2)
+
+
+def _load_script():
+    spec = importlib.util.spec_from_file_location("make_sample_data", ROOT / "scripts" / "make_sample_data.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_committed_sample_data_is_what_the_script_makes(tmp_path):
+    assert SAMPLE.is_dir(), "sample_data/ is committed with the repository"
+    _load_script().main(["--out", str(tmp_path / "sd"), "--seed", "0"])
+    made = sorted(p.relative_to(tmp_path / "sd") for p in (tmp_path / "sd").rglob("*") if p.is_file())
+    assert len(made) == 23
+    for rel in made:
+        assert (SAMPLE / rel).read_bytes() == (tmp_path / "sd" / rel).read_bytes(), rel
+    total = sum(p.stat().st_size for p in SAMPLE.rglob("*") if p.is_file() and "real" not in p.parts)
+    assert total < 5_000_000
+
+
+def test_full_demo_lands_within_30_percent_of_every_paper_cell():
+    # Issue 3, Must-show 1: Tables I and II of the demo (sample_data, 2 catheters x 3 trials)
+    # within 30 % of every cell of the paper's (Kim & Mansi, Tables I and II).
+    res = ex.run_protocol(data_dir=SAMPLE, trials=3, seed=0)
+    assert res.compared() == 22  # 8 Table I cells x 2 metrics + 3 Table II cells x 2
+    assert res.misses() == []
+    # and the recordings read from the files are exactly what the twin records
+    sim = ex.run_protocol(data_dir=None, trials=3, seed=0)
+    strip = lambda d: {k: v for k, v in d.items() if k != "config"}  # noqa: E731
+    assert strip(res.to_dict()) == strip(sim.to_dict())
