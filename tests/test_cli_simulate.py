@@ -33,8 +33,9 @@ def test_periodic_run_with_effects_and_full_metadata(tmp_path):
                        "motion": "periodic", "trial": "2", "seed": "3",
                        "effects": "friction(mu=0.3);latency(delay=0.05)"}.items():
         assert run.meta[key] == value
-    # ice-b: (180/pi) * 1.3 mm * (pi/2) / 8 mm = 14.625 deg (paper eq. 3)
-    assert float(run.meta["true_offset1"]) == pytest.approx(14.625, abs=1e-6)
+    # calibrated ice-b (hystcli/calibration.py): (180/pi) * 1.92 mm * (pi/2) / 6.5 mm
+    # = 90 * 1.92 / 6.5 = 26.5846 deg (paper eq. 3)
+    assert float(run.meta["true_offset1"]) == pytest.approx(90 * 1.92 / 6.5, abs=1e-6)
     assert np.array_equal(run["q1"], run["r1"])
 
 

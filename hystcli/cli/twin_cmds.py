@@ -10,7 +10,8 @@ from .. import io
 from ..effects import parse_effect
 from ..errors import DataError
 from ..model import Shape
-from ..twin import CATHETERS, MOTIONS, get_catheter, simulate_motion
+from ..calibration import calibrated_catheter
+from ..twin import CATHETERS, MOTIONS, simulate_motion
 from .app import OutOpt, QuietOpt, SeedOpt, command, info
 
 
@@ -60,7 +61,8 @@ def simulate_cmd(
     --commands the knob commands come from the file. Effects: friction, rate, coupling,
     deadzone, creep, latency, saturation, contact (DESIGN.md section 8).
     """
-    cath = get_catheter(catheter)
+    # the user-facing catheters are the calibrated ones, the same the sample data was recorded on
+    cath = calibrated_catheter(catheter)
     shp = Shape.parse(shape)
     effs = None
     if effect:
