@@ -163,6 +163,12 @@ class KnobFit:
         The per-branch current fits that were used.
     bootstrap : int
         Bootstrap replicates behind ``stderr`` (0: the fit's Jacobian covariance).
+    start : str
+        Where the tip fit started: ``"current"`` (edges and backlash read from the current's
+        four-piece signature) or ``"loop"`` (a coarse start read from the q-y loop itself, when
+        the current is absent or does not show that signature); ``""`` on the current path.
+    start_note : str
+        Why the loop start was used (empty otherwise).
     """
 
     knob: int
@@ -170,13 +176,15 @@ class KnobFit:
     stderr: dict[str, float]
     rmse: float | None
     method: str
-    ident: KnobIdentification
+    ident: KnobIdentification | None
     n_reversals: int
     n_cycles: int = 0
     current_estimate: dict[str, float] = field(default_factory=dict)
     current_stderr: dict[str, float] = field(default_factory=dict)
     branches: tuple[BranchFit, ...] = ()
     bootstrap: int = 0
+    start: str = ""
+    start_note: str = ""
 
 
 @dataclass(frozen=True)
@@ -293,7 +301,7 @@ def find_reversals(q: np.ndarray, tol: float | None = None) -> tuple[np.ndarray,
     return idx[:n].copy(), top[:n].copy()
 
 
-def check_sweep(run: Run, knob: int) -> SweepCheck:
+def check_sweep(run: Run, knob: int, need_current: bool = True) -> SweepCheck:
     """Check that a run's sweep of one knob can identify its model before anything is fitted.
 
     Needs: columns ``q<k>`` and ``c<k>`` (finite), at least :data:`MIN_SAMPLES` samples, a
@@ -302,33 +310,44 @@ def check_sweep(run: Run, knob: int) -> SweepCheck:
     sweep reaches past the dead zone plus the backlash on both sides is only known once the
     current is read (:func:`identify` says so then).
 
+    With ``need_current`` False (the tip fit, which reads the loop from the measured tip angle)
+    the current may be absent or flat; the tip angle ``y<k>`` is required instead and must move.
+
     Raises
     ------
     IdentificationError
         Naming what is missing.
     """
     where = f"{run.source}: " if run.source else ""
-    qn, cn = f"q{knob}", f"c{knob}"
-    for name in (qn, cn):
+    qn, cn, yn = f"q{knob}", f"c{knob}", f"y{knob}"
+    required = (qn, cn) if need_current else (qn, yn)
+    for name in required:
         if name not in run:
-            raise IdentificationError(f"{where}knob {knob}: column {name!r} is missing "
+            why = "" if need_current else " (the tip fit reads the loop from the tip angle)"
+            raise IdentificationError(f"{where}knob {knob}: column {name!r} is missing{why} "
                                       f"(columns: {', '.join(run.columns) or 'none'})")
     n = len(run)
     if n < MIN_SAMPLES:
         raise IdentificationError(f"{where}knob {knob}: too few samples ({n}); a sweep needs at "
                                   f"least {MIN_SAMPLES}")
-    names = [qn, cn] + ([f"y{knob}"] if f"y{knob}" in run else [])
+    names = [qn] + [nm for nm in (cn, yn) if nm in run]
     for name in names:
         if not np.all(np.isfinite(run[name])):
             row = int(np.flatnonzero(~np.isfinite(run[name]))[0])
             raise IdentificationError(f"{where}column {name!r} has a non-finite value at row {row + 1}")
     q = run[qn]
-    c = run[cn]
     if np.ptp(q) < 1.0:
         raise IdentificationError(f"{where}knob {knob} never moves: {qn} spans {np.ptp(q):.3g} deg")
-    if np.ptp(c) <= 1e-9 * max(1.0, float(np.max(np.abs(c)))):
-        raise IdentificationError(f"{where}knob {knob}: the motor current {cn} is constant ({c[0]:g}); "
-                                  "it carries no dead-zone signature")
+    if need_current:
+        c = run[cn]
+        if np.ptp(c) <= 1e-9 * max(1.0, float(np.max(np.abs(c)))):
+            raise IdentificationError(f"{where}knob {knob}: the motor current {cn} is constant ({c[0]:g}); "
+                                      "it carries no dead-zone signature")
+    else:
+        y = run[yn]
+        if np.ptp(y) <= 1e-9 * max(1.0, float(np.max(np.abs(y)))):
+            raise IdentificationError(f"{where}knob {knob}: the tip angle {yn} is constant ({y[0]:g}); "
+                                      "it carries no hysteresis loop to fit")
     rev, tops = find_reversals(q)
     q_min, q_max = float(np.min(q)), float(np.max(q))
     if rev.size == 0:
@@ -718,10 +737,34 @@ def _median_estimate(per: Mapping[str, np.ndarray], use: np.ndarray | None = Non
     return est
 
 
-def _current_levels(q: np.ndarray, c: np.ndarray, fits: list[BranchFit], d_neg: float,
-                    d_pos: float) -> tuple[float, float, float]:
-    """(slope_dead_zone, slope_loaded, current_dead_zone) from the filtered current."""
-    slope_loaded = float(np.median([f.slopes[3] for f in fits]))
+def _current_levels_loose(q: np.ndarray, c: np.ndarray, chk: SweepCheck, d_neg: float,
+                          d_pos: float) -> tuple[float, float, float]:
+    """The current levels when the current has no four-piece signature (the tip fit's edges).
+
+    The loaded slope is the median over branches of the straight-line ``dC/dq`` past the far
+    edge (ascending: above ``d_pos``, descending: below ``d_neg``); the dead-zone levels as in
+    :func:`_current_levels`.
+    """
+    slopes, spans = [], []
+    for a, b, d in chk.branches:
+        qq, cc = q[a:b + 1], c[a:b + 1]
+        m = qq > d_pos + 1.0 if d > 0 else qq < d_neg - 1.0
+        if m.sum() < 8 or np.ptp(qq[m]) < 1.0:
+            m = np.ones(qq.size, bool)  # the edge lies beyond the travel: the whole branch
+        slopes.append(float(np.polyfit(qq[m], cc[m], 1)[0]))
+        spans.append((a, b))
+    # magnitude: a current without the signature may even fall while the tendon loads
+    return _current_levels(q, c, spans, d_neg, d_pos, slope_loaded=abs(float(np.median(slopes))))
+
+
+def _current_levels(q: np.ndarray, c: np.ndarray, fits: Sequence, d_neg: float,
+                    d_pos: float, slope_loaded: float | None = None) -> tuple[float, float, float]:
+    """(slope_dead_zone, slope_loaded, current_dead_zone) from the filtered current.
+
+    ``fits``: :class:`BranchFit` objects, or ``(start, stop)`` pairs when ``slope_loaded`` is given.
+    """
+    if slope_loaded is None:
+        slope_loaded = float(np.median([f.slopes[3] for f in fits]))
     lo, hi = d_neg + 1.0, d_pos - 1.0
     if hi <= lo:
         lo, hi = d_neg, d_pos
@@ -731,7 +774,7 @@ def _current_levels(q: np.ndarray, c: np.ndarray, fits: list[BranchFit], d_neg: 
     # travel inside the dead zone, noise included
     slopes = []
     for f in fits:
-        a, b = f.start, f.stop
+        a, b = (f.start, f.stop) if isinstance(f, BranchFit) else f
         qq, cc = q[a:b + 1], c[a:b + 1]
         m = (qq >= lo) & (qq <= hi)
         if m.sum() < 8:
@@ -744,17 +787,24 @@ def _current_levels(q: np.ndarray, c: np.ndarray, fits: list[BranchFit], d_neg: 
             den = float(xs @ xs)
             if den > 0:
                 slopes.append(abs(float(xs @ (vs - vs.mean())) / den))
-    slope_dz = float(np.median(slopes)) if slopes else abs(float(np.median([f.slopes[2] for f in fits])))
+    if slopes:
+        slope_dz = float(np.median(slopes))
+    elif fits and isinstance(fits[0], BranchFit):
+        slope_dz = abs(float(np.median([f.slopes[2] for f in fits])))
+    else:  # no dead zone wide enough to look inside: the current's scatter per 2 deg instead
+        slope_dz = float(np.median(np.abs(np.diff(c)))) / max(float(np.median(np.abs(np.diff(q)))), 1e-9)
     return slope_dz, slope_loaded, current_dz
 
 
-def _knob_list(run: Run, knobs) -> list[int]:
+def _knob_list(run: Run, knobs, use_tip: bool = False) -> list[int]:
     where = f"{run.source}: " if run.source else ""
     if knobs is None:
-        ks = [k for k in (1, 2) if f"q{k}" in run and f"c{k}" in run]
+        ks = [k for k in (1, 2) if f"q{k}" in run
+              and (f"c{k}" in run or (use_tip and f"y{k}" in run))]
         if not ks:
+            need = "q1,c1 or q2,c2 (or q1,y1 / q2,y2 for the tip fit)" if use_tip else "q1,c1 or q2,c2"
             raise IdentificationError(
-                f"{where}no knob to identify: needs a pair of columns q1,c1 or q2,c2 "
+                f"{where}no knob to identify: needs a pair of columns {need} "
                 f"(columns: {', '.join(run.columns) or 'none'})")
         return ks
     ks = []
@@ -847,31 +897,183 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
         raise IdentificationError(f"omega must be a positive number, got {omega}")
     if bootstrap < 0:
         raise IdentificationError(f"bootstrap must be >= 0, got {bootstrap}")
-    ks = _knob_list(run, knobs)
+    ks = _knob_list(run, knobs, use_tip)
     fits: dict[int, KnobFit] = {}
     for k in ks:
         fits[k] = _identify_knob(run, k, omega, use_tip, int(bootstrap), int(seed), filter_hz, where)
     methods = sorted({f.method for f in fits.values()})
-    model = Model({k: f.model for k, f in fits.items()},
-                  meta={"method": methods[0] if len(methods) == 1 else
-                        ",".join(f"{k}:{f.method}" for k, f in fits.items())},
-                  identification={k: f.ident for k, f in fits.items()})
+    meta = {"method": methods[0] if len(methods) == 1 else
+            ",".join(f"{k}:{f.method}" for k, f in fits.items())}
+    starts = {k: f.start for k, f in fits.items() if f.start}
+    if starts:
+        meta["tip_start"] = ",".join(f"{k}:{v}" for k, v in starts.items())
+    model = Model({k: f.model for k, f in fits.items()}, meta=meta,
+                  identification={k: f.ident for k, f in fits.items() if f.ident is not None})
     return Identification(fits, model)
 
 
 def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstrap: int, seed: int,
                    filter_hz: float | None, where: str) -> KnobFit:
-    chk = check_sweep(run, k)
+    yname, cname = f"y{k}", f"c{k}"
+    tip = use_tip and yname in run
+    chk = check_sweep(run, k, need_current=not tip)
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
-    c = np.asarray(run[f"c{k}"], dtype=float)
-    if filter_hz is not None and "t" in run:
-        c = lowpass(c, run.sample_rate, filter_hz)
+    c = None
+    if cname in run:
+        c = np.asarray(run[cname], dtype=float)
+        if np.ptp(c) <= 1e-9 * max(1.0, float(np.max(np.abs(c)))):
+            c = None  # only reachable on the tip path: check_sweep refuses it otherwise
+        elif filter_hz is not None and "t" in run:
+            c = lowpass(c, run.sample_rate, filter_hz)
+    rng = np.random.default_rng(seed)
+    cur = None
+    start_note = ""
+    if c is None:
+        start_note = f"no usable motor current {cname} (absent or constant)"
+    elif tip:
+        # the current's four-piece signature is only the tip fit's start: a transmission whose
+        # current does not show it (issue 6: a real instrument) still has a loop to fit
+        try:
+            cur = _current_estimate(q, c, chk, bootstrap, rng, where)
+        except IdentificationError as exc:
+            start_note = f"current signature not usable ({exc})"
+    else:
+        cur = _current_estimate(q, c, chk, bootstrap, rng, where)
+
+    if tip:
+        y = np.asarray(run[yname], float)
+        if cur is None:
+            end_slopes = _check_tip_reach(q, y, chk, where)
+        model, stderr, rmse = _identify_tip(q, y, chk, cur.est if cur is not None else None, omega,
+                                            bootstrap, rng)
+        if cur is None:
+            _check_tip_backlash(model, chk, where, end_slopes)
+        method, start = "tip", ("current" if cur is not None else "loop")
+    else:
+        est = cur.est
+        om = PAPER_OMEGA if omega is None else float(omega)
+        d_pos, d_neg = est["d_pos"], est["d_neg"]
+        # the backlash cannot exceed what a valid model allows at this dead-zone width
+        b_pos, b_neg = max(est["b_pos"], 0.0), max(est["b_neg"], 0.0)
+        h_pos, h_neg = _heights_assumed(d_pos, d_neg, b_pos, b_neg, om)
+        try:
+            model = KnobModel(d_pos=d_pos, d_neg=d_neg, b_pos=b_pos, b_neg=b_neg, omega=om,
+                              h_pos=h_pos, h_neg=h_neg)
+        except ModelError as exc:  # pragma: no cover - the heights are chosen to keep it valid
+            raise IdentificationError(f"{where}knob {k}: the current gives no valid model ({exc})") from None
+        stderr = {n: v for n, v in cur.err.items() if math.isfinite(v)}
+        rmse = None
+        if yname in run:
+            rmse = float(np.sqrt(np.mean((model.forward(q, float(run[yname][0])) - run[yname]) ** 2)))
+        method, start = "current", ""
+    if cur is not None:
+        levels = _current_levels(q, c, cur.good, cur.est["d_neg"], cur.est["d_pos"])
+    elif c is not None:
+        levels = _current_levels_loose(q, c, chk, model.d_neg, model.d_pos)
+    else:
+        levels = None
+    ident = None
+    if levels is not None:
+        slope_dz, slope_loaded, current_dz = levels
+        ident = KnobIdentification(slope_dead_zone=slope_dz, slope_loaded=slope_loaded,
+                                   q_min=chk.q_min, q_max=chk.q_max, rmse=rmse, stderr=stderr,
+                                   current_dead_zone=current_dz)
+    return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
+                   n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles,
+                   current_estimate=dict(cur.est) if cur is not None else {},
+                   current_stderr=({n: v for n, v in cur.err.items() if math.isfinite(v)}
+                                   if cur is not None else {}),
+                   branches=tuple(cur.good) if cur is not None else (), bootstrap=bootstrap,
+                   start=start, start_note=start_note)
+
+
+_SIDE = {"pos": "positive", "neg": "negative"}
+
+
+def _check_tip_reach(q: np.ndarray, y: np.ndarray, chk: SweepCheck, where: str) -> dict[str, float]:
+    """Without the current's signature: the tip must still move at the far end of each branch.
+
+    Over the last :data:`_END_WINDOW` deg of travel before a reversal ``dy/dq`` must be positive
+    well beyond what the tip angle's scatter there allows (a taut tendon moves the tip; in the
+    dead zone it stays put), on most branches heading to each end.
+    """
+    heading = {"pos": [], "neg": []}
+    slopes = {"pos": [], "neg": []}
+    for a, b, d in chk.branches:
+        qq, yy = q[a:b + 1], y[a:b + 1]
+        travel = d * (qq - qq[0])
+        m = travel >= float(travel.max()) - _END_WINDOW
+        ok = False
+        if m.sum() >= 4:
+            x = qq[m] - qq[m].mean()
+            den = float(x @ x)
+            if den > 0:
+                v = yy[m] - yy[m].mean()
+                slope = float(x @ v) / den
+                scatter = math.sqrt(float(np.sum((v - slope * x) ** 2)) / max(m.sum() - 2, 1))
+                # quantised encoders: never trust a scatter below a tenth of the window's span
+                scatter = max(scatter, 1e-3 * max(float(np.ptp(y)), 1e-9))
+                ok = slope >= 6.0 * scatter / math.sqrt(den) and slope > 0.0
+                slopes["pos" if d > 0 else "neg"].append(slope)
+        heading["pos" if d > 0 else "neg"].append(ok)
+    reach = {"pos": chk.q_max, "neg": chk.q_min}
+    for side, flags in heading.items():
+        if not flags or 2 * sum(flags) < len(flags):
+            raise IdentificationError(
+                f"{where}knob {chk.knob} never moves {_SIDE[side]} past the dead zone: reaches "
+                f"{reach[side]:.1f} deg and the tip angle stays flat there (no tendon taut; the motor "
+                "current shows no usable signature either); sweep further")
+    return {side: float(np.median(v)) if v else 0.0 for side, v in slopes.items()}
+
+
+def _check_tip_backlash(model: KnobModel, chk: SweepCheck, where: str,
+                        end_slopes: Mapping[str, float]) -> None:
+    r"""Without the current's signature: the fitted loop must show a loaded stretch after each reversal.
+
+    After the top reversal the tip leaves its backlash plateau at ``q_max - B_pos``; it moves on
+    a loaded slope (which is what fixes :math:`B_{pos}`) only if that is above
+    :math:`\hat D_{neg}`, i.e. ``q_max > D_pos + (H_neg - H_pos)/omega``; likewise at the bottom.
+    """
+    dh = (model.h_neg - model.h_pos) / model.omega
+    # the fitted dead zone must lie inside the sweep when the tip is nearly flat at that end (a
+    # flat tip fits any edge beyond it); a tip that moves at the loaded slope there is loaded,
+    # wherever the fit put the edge
+    for side, past in (("pos", chk.q_max - model.d_pos), ("neg", model.d_neg - chk.q_min)):
+        if past < _MIN_PIECE and end_slopes.get(side, 0.0) < 0.5 * model.omega:
+            reach = chk.q_max if side == "pos" else chk.q_min
+            raise IdentificationError(
+                f"{where}knob {chk.knob} never moves {_SIDE[side]} past the dead zone: reaches "
+                f"{reach:.1f} deg and the fitted dead zone reaches that far (no loaded stretch of the "
+                "tip beyond it; the motor current shows no usable signature either); sweep further")
+    for side, reach, edge in (("pos", chk.q_max, model.d_pos + dh), ("neg", chk.q_min, model.d_neg - dh)):
+        dz = model.d_pos if side == "pos" else model.d_neg
+        # a dead zone fitted beyond the other end of the sweep: no dead zone inside it, the
+        # sloped loop (checked above) is all there is to read
+        beyond = dz < chk.q_min if side == "neg" else dz > chk.q_max
+        if not beyond and (reach - edge if side == "pos" else edge - reach) < _MIN_PIECE:
+            raise IdentificationError(
+                f"{where}knob {chk.knob} does not move {_SIDE[side]} past the dead zone plus the "
+                f"backlash: reaches {reach:.1f} deg, the dead-zone edge is near {dz:.1f} deg, and after "
+                "the reversal the tip stays on its backlash plateau all the way back to the dead zone "
+                "(no loaded stretch to read the backlash from); sweep further")
+
+
+@dataclass(frozen=True)
+class _CurrentEstimate:
+    good: list
+    est: dict
+    err: dict
+
+
+def _current_estimate(q: np.ndarray, c: np.ndarray, chk: SweepCheck, bootstrap: int,
+                      rng: np.random.Generator, where: str) -> _CurrentEstimate:
+    """Edges and backlash from the current's four-piece signature, with their uncertainties."""
+    k = chk.knob
     good, per = _identify_current(q, c, chk, where)
     est = _median_estimate(per)
     for name in ("b_pos", "b_neg"):
         if not math.isfinite(est[name]):  # pragma: no cover - check_sweep guarantees both ways
             raise IdentificationError(f"{where}knob {k}: no branch to read {name} from")
-    rng = np.random.default_rng(seed)
     cycles = np.unique(per["cycle"])
     names = ("d_pos", "d_neg", "b_pos", "b_neg")
     up = per["up"]
@@ -890,52 +1092,72 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         spread = dict(zip(names, map(float, np.std(np.array(reps), axis=0, ddof=1))))
     else:
         spread = {n: _spread(values[n]) for n in names}
-    cur_err = {n: float(np.nanmax([spread[n], floor[n]])) for n in names}
-    slope_dz, slope_loaded, current_dz = _current_levels(q, c, good, est["d_neg"], est["d_pos"])
-
-    yname = f"y{k}"
-    if use_tip and yname in run:
-        model, stderr, rmse = _identify_tip(q, np.asarray(run[yname], float), chk, est, omega,
-                                            bootstrap, rng)
-        method = "tip"
-    else:
-        om = PAPER_OMEGA if omega is None else float(omega)
-        d_pos, d_neg = est["d_pos"], est["d_neg"]
-        # the backlash cannot exceed what a valid model allows at this dead-zone width
-        b_pos, b_neg = max(est["b_pos"], 0.0), max(est["b_neg"], 0.0)
-        h_pos, h_neg = _heights_assumed(d_pos, d_neg, b_pos, b_neg, om)
-        try:
-            model = KnobModel(d_pos=d_pos, d_neg=d_neg, b_pos=b_pos, b_neg=b_neg, omega=om,
-                              h_pos=h_pos, h_neg=h_neg)
-        except ModelError as exc:  # pragma: no cover - the heights are chosen to keep it valid
-            raise IdentificationError(f"{where}knob {k}: the current gives no valid model ({exc})") from None
-        stderr = {n: v for n, v in cur_err.items() if math.isfinite(v)}
-        rmse = None
-        if yname in run:
-            rmse = float(np.sqrt(np.mean((model.forward(q, float(run[yname][0])) - run[yname]) ** 2)))
-        method = "current"
-    ident = KnobIdentification(slope_dead_zone=slope_dz, slope_loaded=slope_loaded,
-                               q_min=chk.q_min, q_max=chk.q_max, rmse=rmse, stderr=stderr,
-                               current_dead_zone=current_dz)
-    return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
-                   n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles,
-                   current_estimate=est, current_stderr={n: v for n, v in cur_err.items() if math.isfinite(v)},
-                   branches=tuple(good), bootstrap=bootstrap)
+    err = {n: float(np.nanmax([spread[n], floor[n]])) for n in names}
+    return _CurrentEstimate(good, est, err)
 
 
-def _identify_tip(q: np.ndarray, y: np.ndarray, chk: SweepCheck, est: Mapping[str, float],
+def _centred(th: np.ndarray, q: np.ndarray, y: np.ndarray, y0: float) -> np.ndarray:
+    # the loop's vertical position (and with it an output's arbitrary zero): the median residual
+    # of the start, removed
+    th = np.clip(th, _THETA_LO, _THETA_HI)
+    th[6] += float(np.median(y - _model_from_theta(th).forward(q, y0)))
+    return th
+
+
+LOOP_GRID = 9
+"""Dead-zone centres (and, separately, widths) tried by the loop start of the tip fit."""
+
+
+def _loop_start(q: np.ndarray, y: np.ndarray, y0: float, chk: SweepCheck) -> np.ndarray:
+    """A coarse tip-fit start read from the q-y loop alone (no current), as a theta vector.
+
+    omega: slope of a straight line through the loop. Backlash (both ends): the loop's vertical
+    width over the middle half of the knob range (descending minus ascending residual of that
+    line) divided by omega, since outside the dead zone f_dn - f_up = omega B. Edges: the best,
+    by soft-L1 residual, of a grid of dead-zone centres and widths over the swept range (width
+    0: no dead zone, the loop a parallelogram); heights from the stated assumption of the
+    current path, then shifted to the loop's median level.
+    """
+    g = np.polyfit(q, y, 1)
+    omega = float(g[0]) if g[0] > 0.05 else PAPER_OMEGA
+    r = y - np.polyval(g, q)
+    lo, hi = chk.q_min, chk.q_max
+    span = hi - lo
+    mid = (q > lo + 0.25 * span) & (q < hi - 0.25 * span)
+    dq = np.gradient(q)
+    up, dn = mid & (dq > 0), mid & (dq < 0)
+    gap = float(np.median(r[dn]) - np.median(r[up])) if up.any() and dn.any() else 0.0
+    b = max(gap, 0.0) / omega
+    best, best_cost = None, math.inf
+    centres = np.linspace(lo + 0.1 * span, hi - 0.1 * span, LOOP_GRID)
+    widths = np.linspace(0.0, 0.6 * span, LOOP_GRID)
+    for cen in centres:
+        for w in widths:
+            d_neg, d_pos = cen - 0.5 * w, cen + 0.5 * w
+            h_pos, h_neg = _heights_assumed(d_pos, d_neg, b, b, omega)
+            th = _centred(_params_to_theta(dict(d_pos=d_pos, d_neg=d_neg, b_pos=b, b_neg=b,
+                                                omega=omega, h_pos=h_pos, h_neg=h_neg)), q, y, y0)
+            e = np.abs(_model_from_theta(th).forward(q, y0) - y) / TIP_F_SCALE
+            cost = float(np.sum(np.sqrt(1.0 + e * e) - 1.0))  # the fit's own soft-L1 loss
+            if cost < best_cost:
+                best, best_cost = th, cost
+    return best
+
+
+def _identify_tip(q: np.ndarray, y: np.ndarray, chk: SweepCheck, est: Mapping[str, float] | None,
                   omega: float | None, bootstrap: int, rng: np.random.Generator,
                   ) -> tuple[KnobModel, dict[str, float], float]:
     n = q.size
     idx = _decimate_index(n, chk.reversals, MAX_TIP_SAMPLES)
     qd, yd = np.ascontiguousarray(q[idx]), np.ascontiguousarray(y[idx])
     y0 = float(y[0])
-    om0 = _initial_omega(q, y, est, chk, PAPER_OMEGA if omega is None else float(omega))
-    h_pos, h_neg = _heights_assumed(est["d_pos"], est["d_neg"], est["b_pos"], est["b_neg"], om0)
-    start = dict(est, omega=om0, h_pos=h_pos, h_neg=h_neg)
-    th0 = _params_to_theta(start)
-    # the loop's vertical position: the median residual of the start, removed
-    th0[6] += float(np.median(yd - _model_from_theta(np.clip(th0, _THETA_LO, _THETA_HI)).forward(qd, y0)))
+    if est is None:
+        th0 = _loop_start(qd, yd, y0, chk)
+    else:
+        om0 = _initial_omega(q, y, est, chk, PAPER_OMEGA if omega is None else float(omega))
+        h_pos, h_neg = _heights_assumed(est["d_pos"], est["d_neg"], est["b_pos"], est["b_neg"], om0)
+        start = dict(est, omega=om0, h_pos=h_pos, h_neg=h_neg)
+        th0 = _centred(_params_to_theta(start), qd, yd, y0)
     res = _fit_tip(qd, yd, y0, th0)
     th = res.x
     model = _model_from_theta(th)

@@ -263,10 +263,17 @@ def test_constant_current_and_too_few_samples():
 def test_knob_columns_and_arguments():
     good = paper_sweep(ICE_A, 0, knobs=(1,))
     no_c = Run({"t": good["t"], "q1": good["q1"], "y1": good["y1"]}, source="s.csv")
+    # the current-only path needs the current ...
     with pytest.raises(IdentificationError, match="s.csv: no knob to identify"):
-        identify(no_c)
+        identify(no_c, use_tip=False)
     with pytest.raises(IdentificationError, match="column 'c1' is missing"):
-        identify(no_c, knobs=[1])
+        identify(no_c, knobs=[1], use_tip=False)
+    # ... the tip fit does not (issue 6): it starts from the q-y loop and says so
+    fit = identify(no_c).fits[1]
+    assert fit.method == "tip" and fit.start == "loop" and fit.ident is None
+    no_y = Run({"t": good["t"], "q1": good["q1"]}, source="s.csv")
+    with pytest.raises(IdentificationError, match="needs a pair of columns q1,c1 or q2,c2 \\(or q1,y1"):
+        identify(no_y)
     with pytest.raises(IdentificationError, match="knob 3"):
         identify(good, knobs=[3])
     with pytest.raises(IdentificationError, match="omega must be a positive number"):
