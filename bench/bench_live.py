@@ -9,7 +9,14 @@ excluding the device's own time, under 1 ms.
    subtracted, leaving encode + write + read + decode + checks on the host;
 2. round trip over a real pty with ``hyst sim-robot`` in another process (what a step costs end
    to end: pty, device, twin), and the same with a DeviceProbe step;
-3. detect-shift live over the pty per shape: steps, travel, time, offset error.
+3. detect-shift live over the pty per shape: steps, travel, time, offset error;
+4. the search as `hyst detect-shift --port` runs it (model thresholds from the identification,
+   default options, one connection per knob) over a pty to `hyst sim-robot`: total knob travel
+   and steps per shape, offset error over several seeds at the device's default knob speed
+   (20 deg/s) and at 5 deg/s (the causal 20 Hz current filter lags ~16 ms, i.e. ~0.3 deg at
+   20 deg/s, in the direction of motion);
+5. host-side overhead per step of the whole search (Algorithm 1's own computation + driver:
+   encode, write, read, decode, checks), the device's time subtracted (in-process port).
 """
 from __future__ import annotations
 
@@ -155,7 +162,81 @@ def live_detect_shift() -> None:
             stop(proc)
 
 
+SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=180", "alpha=45,theta=0;alpha=45,theta=90")
+
+
+def identified_model(cat=None):
+    """The twin's straight-shaft model with the identification `hyst identify` stores for
+    detect-shift (dead-zone slope ~0.5 mA/deg, loaded k_load, dead-zone current = no-load)."""
+    from hystcli.model import KnobIdentification, Model
+
+    cat = cat or get_catheter("ice-a")
+    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cat.current.k_load, q_min=-40.0,
+                                   q_max=40.0, current_dead_zone=cat.current.no_load) for k in (1, 2)}
+    return Model(dict(cat.knobs), cat.geometry, identification=ident)
+
+
+def cli_search_over_pty(seeds: int = 5) -> None:
+    from hystcli.device import open_probe
+    from hystcli.shift import detect_shift
+
+    cat = get_catheter("ice-a")
+    model = identified_model(cat)
+    print(f"4. detect-shift --port path (open_probe per knob, thresholds from the model, step 0.5 deg, "
+          f"max-travel 40) over a pty to `hyst sim-robot`, ice-a, seeds 0-{seeds - 1}:")
+    print(f"   {'shape':38s} knob speed  steps(mean/max) travel(mean/max)  err mean  |err| max  ms/step")
+    for shape in SHAPES:
+        true = cat.true_offsets(Shape.parse(shape))
+        rows = {(k, sp): [] for k in (1, 2) for sp in (None, 5.0)}
+        for seed in range(seeds):
+            for speed in (None, 5.0):
+                proc, path = start_sim_robot("--shape", shape, "--seed", str(seed))
+                try:
+                    for k in (1, 2):
+                        probe = open_probe(path, 115200, k, speed=speed)
+                        try:
+                            t0 = time.perf_counter()
+                            r = detect_shift(model, probe, k, max_travel=40.0)
+                            el = time.perf_counter() - t0
+                        finally:
+                            probe.device.close()
+                        rows[(k, speed)].append((r.steps, r.travel, r.offset - true[k], el / (r.steps + 1)))
+                finally:
+                    stop(proc)
+        for (k, speed), vals in rows.items():
+            a = np.array(vals)
+            print(f"   {shape:38s} {k:4d} {speed or 20:5.0f}  {a[:, 0].mean():6.1f}/{a[:, 0].max():3.0f}"
+                  f"     {a[:, 1].mean():6.1f}/{a[:, 1].max():5.1f}     {a[:, 2].mean():+6.2f}"
+                  f"   {np.abs(a[:, 2]).max():8.2f}  {a[:, 3].mean() * 1e3:7.2f}")
+
+
+def search_host_overhead() -> None:
+    from hystcli.shift import detect_shift
+
+    cat = get_catheter("ice-a")
+    model = identified_model(cat)
+    print("5. host-side overhead per step of the whole search (Algorithm 1 + driver), device time "
+          "subtracted (in-process port, no pty):")
+    for shape in SHAPES:
+        port = DirectPort(DeviceEmulator(LiveTwin(cat, shape=Shape.parse(shape), seed=0)))
+        dev = Device(port, timeout=1.0)
+        per, steps = [], 0
+        for k in (1, 2):
+            probe = DeviceProbe(dev, k)
+            d0 = port.device_time
+            t0 = time.perf_counter()
+            r = detect_shift(model, probe, k, max_travel=40.0)
+            host = (time.perf_counter() - t0) - (port.device_time - d0)
+            moves = r.steps + 1  # the return home is one more MOVE
+            per.append(host / moves)
+            steps += moves
+        print(f"   {shape:38s} {steps:4d} MOVEs   host {np.mean(per) * 1e6:7.1f} us/step "
+              f"(knob 1 {per[0] * 1e6:.1f}, knob 2 {per[1] * 1e6:.1f})   target < 1000 us")
+
+
 if __name__ == "__main__":
     host_overhead()
     pty_round_trip()
     live_detect_shift()
+    cli_search_over_pty()
+    search_host_overhead()

@@ -25,7 +25,8 @@ from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, P
 
 @contextlib.contextmanager
 def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
-            baud: int) -> Iterator[tuple[dict[int, Any], Any]]:
+            baud: int, current_ceiling: float | None = None,
+            speed: float | None = None) -> Iterator[tuple[dict[int, Any], Any]]:
     """Yield ``({knob: probe}, run or None)``; live probes are closed on the way out."""
     if replay is not None:
         run = read_run(replay)
@@ -49,7 +50,7 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
     with contextlib.ExitStack() as stack:
         probes = {}
         for k in knobs:
-            probe = device.open_probe(port, baud, k)
+            probe = device.open_probe(port, baud, k, current_ceiling=current_ceiling, speed=speed)
             dev = getattr(probe, "device", None)
             if dev is not None and hasattr(dev, "close"):
                 stack.callback(dev.close)
@@ -109,6 +110,12 @@ def detect_shift_cmd(
     max_steps: Annotated[Optional[int], typer.Option(
         "--max-steps", help="Step limit (default: max-travel / step).")] = None,
     max_travel: Annotated[float, typer.Option("--max-travel", help="Knob travel limit of the search, deg.")] = 25.0,
+    current_ceiling: Annotated[float, typer.Option(
+        "--current-ceiling", help="Live: a motor current beyond +-this (mA) is a contact: stop, return "
+                                  "the knob, exit 1.")] = 2000.0,
+    speed: Annotated[float, typer.Option(
+        "--speed", help="Live: knob speed of each step, deg/s. Slow steps keep the lag of the "
+                        "device's causal 20 Hz current filter (about 16 ms) small against the step.")] = 5.0,
     plot: PlotOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -117,7 +124,8 @@ def detect_shift_cmd(
         raise typer.BadParameter("give exactly one of --replay RUN.csv or --port PORT", param_hint="--replay / --port")
     if fmt not in (OutputFormat.table, OutputFormat.json):
         raise typer.BadParameter("detect-shift prints table or json", param_hint="--format")
-    for name, v in (("--step", step), ("--max-travel", max_travel)):
+    for name, v in (("--step", step), ("--max-travel", max_travel), ("--current-ceiling", current_ceiling),
+                    ("--speed", speed)):
         if not (math.isfinite(v) and v > 0):
             raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
@@ -139,7 +147,7 @@ def detect_shift_cmd(
     options = dict(eps_lower=eps_lower, eps_upper=eps_upper, current_dead_zone=current_dead_zone,
                    step=step, max_steps=max_steps, max_travel=max_travel)
     results: dict[int, shift_mod.ShiftResult] = {}
-    with _probes(model, knobs, replay, port, baud) as (probes, run):
+    with _probes(model, knobs, replay, port, baud, current_ceiling, speed) as (probes, run):
         for k, probe in probes.items():
             progress = None
             if port is not None and not quiet:
