@@ -1,7 +1,8 @@
 """Inverse-model compensation of desired trajectories, and the model's prediction of a run.
 
 ``compensate`` turns desired tip angles ``r<k>`` into knob commands ``q<k>`` through the exact
-inverse of each knob's model (DESIGN.md section 3), shifted by the offset in effect for the
+inverse of each knob's model (DESIGN.md section 3, and of the model's effects when it has some),
+shifted by the offset in effect for the
 trajectory (the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
 Compensation-Only). ``predict`` runs the model forward on a run's commands: the "sim" that the
 evaluation and the diagnosis compare with measurement.
@@ -48,7 +49,11 @@ def _knobs_of(model: Model, run: Run, prefix: str, what: str) -> list[int]:
 
 
 def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Compensation:
-    """Knob commands that make the model follow the desired tip angles.
+    """Knob commands that make the model (with its effects, if any) follow the desired tip angles.
+
+    Without effects this is the exact inverse of DESIGN.md section 3; with the effects
+    ``hyst diagnose`` added to the model, :func:`hystcli.effects.inverse` undoes them stage by
+    stage as well.
 
     Parameters
     ----------
@@ -69,9 +74,17 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
         k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
     new_cols: dict[str, np.ndarray] = {}
     warnings: list[str] = []
+    with_effects = None
+    if model.effects:
+        from .effects import inverse as inverse_with_effects
+
+        with_effects = inverse_with_effects(model, trajectory, offsets=offsets, knobs=knobs)
+        warnings.extend(with_effects.warnings)
     for k in knobs:
-        knob = model.knob(k).with_offset(offsets[k])
-        q = knob.inverse(trajectory[f"r{k}"], y0=0.0)
+        if with_effects is not None:
+            q = with_effects.q[k]
+        else:
+            q = model.knob(k).with_offset(offsets[k]).inverse(trajectory[f"r{k}"], y0=0.0)
         new_cols[f"q{k}"] = q
         ident = model.identification.get(k)
         if ident is not None:

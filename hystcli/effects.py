@@ -36,8 +36,8 @@ latency        y_reported(t) = y(t - delay)                                     
 On the forward model a pure input delay equals a pure output delay (the hysteresis is
 rate-independent), so ``rate`` is a first-order lag, not a delay: it also rounds the tip's
 response to fast command changes (the jumps a compensator makes), which ``latency`` does not.
-Every stage is monotone in its input, so an inverse for compensation can later undo them stage
-by stage in reverse order (not implemented yet).
+Every stage is monotone in its input, so :func:`inverse` (compensation with effects) undoes them
+stage by stage in reverse order.
 
 Sequential stages (hysteresis, the first-order lags) are numba-compiled; the others are numpy
 expressions. Every stage can carry its state across calls (:class:`ChainState`), so the live
@@ -367,12 +367,16 @@ def _by_name(effects: Sequence[Effect]) -> dict[str, Effect]:
     return {e.name: e for e in effects if not e.is_null}
 
 
-def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape) -> KnobModel:
+def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
+                   condition: float | None = None) -> KnobModel:
     """The knob's parameters under the shaft ``shape`` (stage ``condition``).
 
     ``friction``: with g = exp(mu * kappa), kappa = total curvature in rad, the backlash widths
     are multiplied by g and omega divided by g. ``deadzone``: the edges move apart by
     ``width * kappa`` in all. Returns ``knob`` itself (the same object) when neither is on.
+    ``condition`` (deg), when given, replaces the shape's total curvature as the driver: other
+    cable-driven data state their own condition (a resistive load, a frequency) in the run's
+    ``condition`` metadata, scaled to degrees of curvature-equivalent.
 
     Raises
     ------
@@ -383,7 +387,7 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape) -> 
     fr, dz = on.get("friction"), on.get("deadzone")
     if fr is None and dz is None:
         return knob
-    kappa = math.radians(shape.total_curvature)
+    kappa = math.radians(shape.total_curvature if condition is None else condition)
     if kappa == 0.0:
         return knob
     p = knob.params()
@@ -400,7 +404,8 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape) -> 
         return KnobModel(**p)
     except ModelError as exc:
         names = "+".join(e.name for e in (fr, dz) if e is not None)
-        raise ModelError(f"effect {names} at total curvature {shape.total_curvature:g} deg: {exc}") from None
+        kdeg = shape.total_curvature if condition is None else condition
+        raise ModelError(f"effect {names} at total curvature {kdeg:g} deg: {exc}") from None
 
 
 def knob_input(k: int, q: Mapping[int, np.ndarray], t: np.ndarray | None, effects: Sequence[Effect],
@@ -425,7 +430,7 @@ def knob_input(k: int, q: Mapping[int, np.ndarray], t: np.ndarray | None, effect
 
 def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarray | None,
               effects: Sequence[Effect] = (), shape: Shape = Shape(), y0: float = 0.0,
-              state: ChainState | None = None) -> KnobTrace:
+              state: ChainState | None = None, condition: float | None = None) -> KnobTrace:
     """Run knob ``k`` through every stage: the tip angle the effects make of the commands.
 
     Parameters
@@ -446,6 +451,9 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         The reported tip before the first sample.
     state : ChainState, optional
         Carried between calls (the live twin); updated in place.
+    condition : float, optional
+        Driver of the condition stage in place of the shape's total curvature (deg; see
+        :func:`condition_knob`).
 
     Returns
     -------
@@ -453,7 +461,7 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         With no effect switched on, ``trace.y`` is exactly ``knob.forward(q[k], y0)``.
     """
     on = _by_name(effects)
-    kn = condition_knob(knob, effects, shape)
+    kn = condition_knob(knob, effects, shape, condition)
     x = knob_input(k, q, t, effects, state)
     sat = on.get("saturation")
     if state is not None and state.y is not None:
@@ -525,6 +533,29 @@ def contact_current(trace: KnobTrace, effects: Sequence[Effect]) -> np.ndarray |
 # --------------------------------------------------------------------------------------------
 # the model's prediction
 # --------------------------------------------------------------------------------------------
+def run_condition(meta: Mapping[str, str], source: str | None = None) -> float | None:
+    """The ``condition`` metadata of a run (deg of curvature-equivalent), or None when absent.
+
+    Catheter runs leave it out: their condition is the total curvature of ``shape``. Other
+    cable-driven data give the driver of the condition effects here (see :func:`condition_knob`).
+
+    Raises
+    ------
+    DataError
+        A value that is not a finite number.
+    """
+    text = meta.get("condition")
+    if text is None or str(text).strip() == "":
+        return None
+    try:
+        value = float(text)
+    except ValueError:
+        raise DataError(f"{source or 'run'}: metadata condition {text!r} is not a number") from None
+    if not math.isfinite(value):
+        raise DataError(f"{source or 'run'}: metadata condition must be finite")
+    return value
+
+
 def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = None) -> dict[int, np.ndarray]:
     """Tip angle of each knob that ``model`` plus its effects predicts for ``run``'s commands.
 
@@ -556,6 +587,7 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
     effs = as_effects(model.effects if effects is None else effects)
     offsets = model.offsets_for(run.meta)
     shape = Shape.parse(run.meta.get("shape"))
+    cond = run_condition(run.meta, run.source)
     q = {k: np.ascontiguousarray(run[f"q{k}"], dtype=np.float64) for k in (1, 2) if f"q{k}" in run}
     knobs = [k for k in model.knobs if k in q]
     if not knobs:
@@ -570,5 +602,204 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
         if not effs:
             out[k] = knob.forward(q[k], y0)
         else:
-            out[k] = tip_chain(knob, k, q, t, effs, shape, y0).y
+            out[k] = tip_chain(knob, k, q, t, effs, shape, y0, condition=cond).y
     return out
+
+
+# --------------------------------------------------------------------------------------------
+# the inverse (compensation with effects)
+# --------------------------------------------------------------------------------------------
+@njit(cache=True, fastmath=False)
+def _unlag_kernel(z_target, t, tau, lead, out):
+    # the command u whose first-order lag (the exact solution of _lag_kernel, started at rest on
+    # u[0]) lands on z_target: z_i = A u_i + B with A = 1 - c, B = c u_{i-1} + e (z_{i-1} - u_{i-1}),
+    # c = (1 - e) tau / dt, e = exp(-dt/tau); 0 < A <= 1, so u_i is unique. A knob cannot move
+    # infinitely fast: the lead |u - z_target| is limited to ``lead`` deg (then the lag catches
+    # up over the next samples)
+    n = z_target.shape[0]
+    if n == 0:
+        return
+    u_prev = z_target[0]
+    z = z_target[0]
+    tp = t[0]
+    out[0] = u_prev
+    for i in range(1, n):
+        dt = t[i] - tp
+        if dt > 0.0:
+            e = math.exp(-dt / tau)
+            c = (1.0 - e) * tau / dt
+            a = 1.0 - c
+            b = c * u_prev + e * (z - u_prev)
+            u = (z_target[i] - b) / a
+            if u > z_target[i] + lead:
+                u = z_target[i] + lead
+            elif u < z_target[i] - lead:
+                u = z_target[i] - lead
+            z = a * u + b
+        else:
+            u = u_prev
+        out[i] = u
+        u_prev = u
+        tp = t[i]
+
+
+@njit(cache=True, fastmath=False)
+def _uncreep_kernel(y_target, t, fraction, tau, out):
+    # y = (1 - f) yh + f lag(yh, tau) with lag(yh)_i = A yh_i + B (see _unlag_kernel): solve for
+    # yh_i sample by sample; 1 - f + f A > 0, and the inverse is stable (creep is minimum-phase)
+    n = y_target.shape[0]
+    if n == 0:
+        return
+    u_prev = y_target[0]
+    z = y_target[0]
+    tp = t[0]
+    out[0] = u_prev
+    for i in range(1, n):
+        dt = t[i] - tp
+        if dt > 0.0:
+            e = math.exp(-dt / tau)
+            c = (1.0 - e) * tau / dt
+            a = 1.0 - c
+            b = c * u_prev + e * (z - u_prev)
+            u = (y_target[i] - fraction * b) / (1.0 - fraction + fraction * a)
+            z = a * u + b
+        else:
+            u = u_prev
+        out[i] = u
+        u_prev = u
+        tp = t[i]
+
+
+@dataclass(frozen=True)
+class Inverse:
+    """Result of :func:`inverse`: the knob commands and what the user should know.
+
+    Attributes
+    ----------
+    q : dict of int to numpy.ndarray
+        Knob commands per knob (deg).
+    warnings : tuple of str
+        Targets no command can reach (a wall, the saturation limit), clipped.
+    """
+
+    q: dict
+    warnings: tuple = ()
+
+
+def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
+            effects: Sequence[Effect | EffectSpec] | None = None, knobs: Sequence[int] | None = None,
+            max_lead: float = 30.0, iterations: int = 50) -> Inverse:
+    """Knob commands that make the model *with its effects* follow the desired tip angles.
+
+    Every stage of :func:`tip_chain` is monotone in its input, so the chain is undone stage by
+    stage in reverse order:
+
+    ======== ===================================================================================
+    sensor   latency: aim at the reference ``delay`` seconds ahead (the trajectory is known in
+             advance; the last value is held at the end)
+    contact  the tip cannot pass the wall: the target is clipped there (with a warning)
+    output   creep: per-sample exact inverse of the partial lag; saturation: ``atanh``
+             (targets beyond 99.9 % of the limit are clipped, with a warning)
+    hyst.    the exact inverse of DESIGN.md section 3 on the conditioned knob (friction,
+             deadzone under the run's shape)
+    input    rate: per-sample exact inverse of the first-order lag, the lead over the target
+             limited to ``max_lead`` deg; coupling: the other knob's command is added back,
+             solved for both knobs together by fixed-point iteration (contraction |gain| < 1);
+             with rate and coupling both on the exact inverse is unstable, so the coupling is
+             cancelled on the other knob's lagged command (error ~ gain*tau*its speed)
+    ======== ===================================================================================
+
+    So ``predict`` of the commands equals the reference except during the first ``delay``
+    seconds, where a rate lag needs more lead than ``max_lead``, and where a target was clipped.
+
+    Parameters
+    ----------
+    model : Model
+    run : Run
+        Desired tip angles ``r<k>``, time ``t``, metadata ``shape`` (and ``condition``).
+    offsets : mapping, optional
+        Offset per knob (default: :meth:`Model.offsets_for` of the run's metadata).
+    effects : sequence, optional
+        Instead of ``model.effects``.
+    knobs : sequence of int, optional
+        Knobs to compensate (default: every knob with an ``r<k>`` column).
+    max_lead : float
+        Largest lead (deg) of a command over the lagged input it aims at (rate effect).
+    iterations : int
+        Most fixed-point passes for coupling.
+
+    Returns
+    -------
+    Inverse
+
+    Raises
+    ------
+    DataError
+        No ``r<k>`` column, or no ``t`` when a time-driven effect is on.
+    """
+    effs = as_effects(model.effects if effects is None else effects)
+    on = _by_name(effs)
+    use = [int(k) for k in (knobs if knobs is not None else run.knobs("r"))]
+    if not use:
+        raise DataError(f"{run.source or 'run'}: no desired tip angle column (r1 or r2)")
+    offs = model.offsets_for(run.meta) if offsets is None else dict(offsets)
+    shape = Shape.parse(run.meta.get("shape"))
+    cond = run_condition(run.meta, run.source)
+    needs_t = any(n in on for n in ("rate", "creep", "latency"))
+    t = np.ascontiguousarray(run["t"], dtype=np.float64) if (needs_t or "t" in run) else None
+    warnings: list[str] = []
+    x: dict[int, np.ndarray] = {}
+    for k in use:
+        r = np.ascontiguousarray(run[f"r{k}"], dtype=np.float64)
+        if not np.all(np.isfinite(r)):
+            raise DataError(f"{run.source or 'run'}: r{k} holds NaN or infinite values")
+        lat = on.get("latency")
+        if lat is not None and r.size:
+            r = np.interp(t + lat["delay"], t, r)
+        wall = on.get("contact")
+        if wall is not None:
+            w = wall["wall"]
+            clipped = np.minimum(r, w) if w > 0 else np.maximum(r, w)
+            if np.any(clipped != r):
+                warnings.append(f"knob {k}: the reference passes the wall at {w:g} deg: clipped there")
+            r = clipped
+        creep = on.get("creep")
+        if creep is not None and r.size:
+            out = np.empty_like(r)
+            _uncreep_kernel(r, t, float(creep["fraction"]), float(creep["tau"]), out)
+            r = out
+        sat = on.get("saturation")
+        if sat is not None:
+            lim = sat["limit"]
+            reach = 0.999 * lim
+            if np.any(np.abs(r) > reach):
+                warnings.append(f"knob {k}: the reference passes 99.9 % of the saturation limit "
+                                f"{lim:g} deg: clipped there")
+            r = lim * np.arctanh(np.clip(r, -reach, reach) / lim)
+        kn = condition_knob(model.knob(k).with_offset(offs[k]), effs, shape, cond)
+        x[k] = kn.inverse(r, y0=0.0)
+    rate, cp = on.get("rate"), on.get("coupling")
+
+    def unlag(z: np.ndarray) -> np.ndarray:
+        if rate is None or z.size == 0:
+            return z
+        out = np.empty_like(z)
+        _unlag_kernel(np.ascontiguousarray(z), t, float(rate["tau"]), float(max_lead), out)
+        return out
+
+    def relag(z: np.ndarray) -> np.ndarray:
+        return z if rate is None or z.size == 0 else _lag(z, t, rate["tau"], None)
+
+    q = {k: unlag(x[k]) for k in use}
+    if cp is not None and len(use) == 2:
+        g = cp["gain"]
+        for _ in range(max(int(iterations), 1)):
+            # with rate on, cancelling g*q_other exactly is unstable (the inverse of
+            # L(q_k) - g q_other has a pole at (1/|g| - 1)/tau > 0): cancel g*L(q_other) instead,
+            # a contraction by |g| that leaves about g*tau*(speed of the other knob)
+            new = {k: unlag(x[k] + g * relag(q[3 - k])) for k in use}
+            change = max(float(np.max(np.abs(new[k] - q[k]), initial=0.0)) for k in use)
+            q = new
+            if change < 1e-10:
+                break
+    return Inverse(q, tuple(warnings))

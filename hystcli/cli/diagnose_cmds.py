@@ -1,0 +1,118 @@
+"""``hyst diagnose``: where the model departs from measurement, which effect causes it, how far it shrinks."""
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+from typing import Annotated, List, Optional
+
+import typer
+
+from .. import io
+from .app import (FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, echo_json, info,
+                  stderr_is_tty)
+
+
+@command("diagnose", epilog="Example: hyst diagnose --model model.json runs/*.csv -o report.json "
+                            "--model-out augmented.json --holdout motion=nonperiodic")
+def diagnose_cmd(
+    runs: Annotated[List[Path], typer.Argument(help="Run CSVs with t, q<k> and measured y<k> (at least 2, "
+                                                    "one catheter).", show_default=False)],
+    model_path: ModelOpt,
+    output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the report as JSON here.")] = None,
+    model_out: Annotated[Optional[Path], typer.Option(
+        "--model-out", help="Write the model with the chosen effects here (hyst predict/compensate use them).")] = None,
+    plot: PlotOpt = None,
+    holdout: Annotated[Optional[str], typer.Option(
+        "--holdout", help="key=value: test on the runs whose metadata key equals value, train on the rest "
+                          "(default: leave one run out).")] = None,
+    candidates: Annotated[Optional[str], typer.Option(
+        "--candidates", help="Comma-separated effects to try (default: all of DESIGN.md section 8).")] = None,
+    max_effects: Annotated[int, typer.Option("--max-effects", min=0, help="Most effects to add.")] = 3,
+    bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over runs for intervals and "
+                                                       "inclusion frequencies (0: none).")] = 0,
+    fmt: FormatOpt = OutputFormat.table,
+    seed: SeedOpt = 0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Diagnose the sim-to-real gap of a model on measured runs.
+
+    WHERE: the residual y - predicted by loop phase, direction, shape, speed, amplitude, other
+    knob and time. WHICH: every unmodelled effect is fitted on training runs and judged on
+    held-out runs; the best are added while the held-out gain is worth it. HOW FAR: held-out RMSE
+    and PTPE before and after.
+    """
+    from ..diagnose import diagnose, diagnosis_figure
+
+    if fmt not in (OutputFormat.table, OutputFormat.json):
+        raise typer.BadParameter("diagnose writes table or json", param_hint="--format")
+    inputs = [*runs, model_path]
+    for out in (output, model_out, plot):
+        if out is not None:
+            io.check_not_input(out, inputs)
+    model = io.load_model(model_path)
+    loaded = [io.read_run(p, require=("t",)) for p in runs]
+    cands = None
+    if candidates is not None:
+        cands = [c.strip() for c in candidates.split(",") if c.strip()]
+        if not cands:
+            raise typer.BadParameter("give at least one effect name", param_hint="--candidates")
+    progress = (lambda msg: info(f"  {msg}")) if (stderr_is_tty() and not quiet) else None
+    diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
+                    bootstrap=bootstrap, seed=seed, progress=progress)
+    report = diag.report()
+    report["model"] = str(model_path)
+    png = diagnosis_figure(diag, loaded) if plot is not None else None
+    if output is not None:
+        io.atomic_write_text(output, json.dumps(report, indent=2, allow_nan=False) + "\n", inputs=inputs)
+    if model_out is not None:
+        meta = dict(diag.model.meta)
+        meta["diagnosed_on"] = ", ".join(Path(p).name for p in runs)
+        io.save_model(model_out, replace(diag.model, meta=meta), inputs=inputs)
+    if png is not None:
+        io.atomic_write(plot, lambda f: f.write(png), inputs=inputs)
+    if quiet:
+        return
+    if fmt == OutputFormat.json:
+        echo_json(report)
+        return
+    typer.echo(render_table(report))
+    for path in (output, model_out, plot):
+        if path is not None:
+            info(f"wrote {path}")
+
+
+def render_table(report: dict) -> str:
+    """The report as text: the finding, the candidate ranking, the figures."""
+    lines = ["WHERE", f"  {report['where']['finding']}"]
+    phase = report["where"]["factors"].get("phase", [])
+    if phase:
+        lines.append("  " + "  ".join(f"{g['level']}: {100 * g['energy_share']:.0f} % of energy in "
+                                      f"{100 * g['sample_share']:.0f} % of samples" for g in phase))
+    which = report["which"]
+    lines += ["", f"WHICH (hold-out: {report['holdout']}; an effect joins at >= {which['min_gain_pct']:g} % "
+                  "held-out RMSE shrink)"]
+    for i, rd in enumerate(which["rounds"], start=1):
+        base = " + ".join(rd["base"]) or "base model"
+        lines.append(f"  round {i}: over {base} (held-out RMSE {rd['base_heldout_rmse']:.3f} deg)"
+                     + (f" -> add {rd['chosen']}" if rd["chosen"] else " -> nothing added"))
+        lines.append(f"    {'rank':>4s}  {'effect':11s} {'held-out RMSE':>13s} {'shrink %':>9s} {'dBIC':>12s}  params")
+        for c in rd["candidates"]:
+            params = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in c["params"].items())
+            bic = f"{c['delta_bic']:.1f}" if c["delta_bic"] is not None else "-"
+            lines.append(f"    {c['rank']:4d}  {c['name']:11s} {c['heldout_rmse']:13.3f} {c['gain_pct']:9.1f} "
+                         f"{bic:>12s}  {params}")
+    for s in which["selected"]:
+        extra = ""
+        if s["interval95"]:
+            extra += " 95 % " + ", ".join(f"{p}=[{a:.4g}, {b:.4g}]" for p, (a, b) in s["interval95"].items())
+        if s["inclusion"] is not None:
+            extra += f" inclusion {100 * s['inclusion']:.0f} %"
+        lines.append(f"  added {s['name']}(" + ", ".join(
+            f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in s["params"].items()) + ")" + extra)
+    hf = report["how_far"]
+    lines += ["", "HOW FAR (held-out runs)",
+              f"  RMSE {hf['rmse_before']:.3f} -> {hf['rmse_after']:.3f} deg ({hf['rmse_shrink_pct']:.1f} % shrink)",
+              f"  PTPE {hf['ptpe_before']:.3f} -> {hf['ptpe_after']:.3f} deg ({hf['ptpe_shrink_pct']:.1f} % shrink)",
+              "", report["verdict"]]
+    return "\n".join(lines)
