@@ -12,7 +12,11 @@ import pkgutil
 
 from .app import app
 
-for _mod in sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name.endswith("_cmds")):
+# the workflow's order first (as `hyst --help` lists them), then any other command module
+_ORDER = ("model_cmds", "shift_cmds", "metrics_cmds", "diagnose_cmds", "twin_cmds", "device_cmds",
+          "demo_cmds", "import_cmds")
+_found = sorted(m.name for m in pkgutil.iter_modules(__path__) if m.name.endswith("_cmds"))
+for _mod in [m for m in _ORDER if m in _found] + [m for m in _found if m not in _ORDER]:
     importlib.import_module(f"{__name__}.{_mod}")
 
 
