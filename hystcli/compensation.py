@@ -37,13 +37,19 @@ class Compensation:
     warnings: tuple = ()
 
 
-def _knobs_of(model: Model, run: Run, prefix: str, what: str) -> list[int]:
+def knobs_of(model: Model, run: Run, prefix: str, what: str, name: str | None = None) -> list[int]:
+    """Knobs with a ``{prefix}<k>`` column in ``run``, each checked to be a knob of ``model``.
+
+    Raises :class:`DataError` when the run has no such column and :class:`ModelError` when the
+    model lacks one of the run's knobs; ``name`` (default: the run's source) names the run.
+    """
+    name = name or run.source or "run"
     knobs = run.knobs(prefix)
     if not knobs:
-        raise DataError(f"{run.source or 'run'}: no {what} column ({prefix}1 or {prefix}2)")
+        raise DataError(f"{name}: no {what} column ({prefix}1 or {prefix}2)")
     for k in knobs:
         if k not in model.knobs:
-            raise ModelError(f"{run.source or 'run'} has column {prefix}{k} but the model has no knob {k} "
+            raise ModelError(f"{name} has column {prefix}{k} but the model has no knob {k} "
                              f"(it has knobs {', '.join(map(str, model.knobs))})")
     return knobs
 
@@ -69,7 +75,7 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     -------
     Compensation
     """
-    knobs = _knobs_of(model, trajectory, "r", "desired tip angle")
+    knobs = knobs_of(model, trajectory, "r", "desired tip angle")
     offsets = {k: 0.0 for k in knobs} if ignore_shift else {
         k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
     new_cols: dict[str, np.ndarray] = {}
@@ -113,7 +119,7 @@ def predict_tip(model: Model, run: Run) -> dict[int, np.ndarray]:
     Each knob uses the offset in effect for the run (:meth:`Model.offsets_for`) and starts from
     the run's first measured ``y<k>`` when there is one, else from 0 (DESIGN.md section 3).
     """
-    knobs = _knobs_of(model, run, "q", "knob command")
+    knobs = knobs_of(model, run, "q", "knob command")
     if model.effects:
         from .effects import predict as predict_with_effects
 

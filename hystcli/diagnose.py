@@ -47,6 +47,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 
 from . import effects as E
+from .compensation import knobs_of
 from .errors import DataError, ModelError
 from .io import Run
 from .metrics import ptpe as _ptpe
@@ -857,13 +858,7 @@ def _validate(model: Model, runs: Sequence[Run]) -> list[str]:
         raise DataError(f"the model is of catheter {mc} but the runs are of {next(iter(catheters))}")
     for name, r in zip(names, runs):
         r.require("t")
-        qk = r.knobs("q")
-        if not qk:
-            raise DataError(f"{name}: no knob command column (q1 or q2)")
-        for k in qk:
-            if k not in model.knobs:
-                raise ModelError(f"{name} has column q{k} but the model has no knob {k} "
-                                 f"(it has knobs {', '.join(map(str, model.knobs))})")
+        for k in knobs_of(model, r, "q", "knob command", name=name):
             if f"y{k}" not in r:
                 raise DataError(f"{name}: no measured tip angle y{k} (diagnose compares the model with "
                                 f"measurement; q{k} is there but y{k} is not)")

@@ -610,6 +610,15 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
 # the inverse (compensation with effects)
 # --------------------------------------------------------------------------------------------
 @njit(cache=True, fastmath=False)
+def _lag_affine(dt, tau, u_prev, z_prev):
+    # one step of _lag_kernel written as z_i = a u_i + b: a = 1 - c, b = c u_{i-1} + e (z_{i-1} - u_{i-1}),
+    # c = (1 - e) tau / dt, e = exp(-dt/tau); both inverse kernels solve this for their own unknown
+    e = math.exp(-dt / tau)
+    c = (1.0 - e) * tau / dt
+    return 1.0 - c, c * u_prev + e * (z_prev - u_prev)
+
+
+@njit(cache=True, fastmath=False)
 def _unlag_kernel(z_target, t, tau, lead, out):
     # the command u whose first-order lag (the exact solution of _lag_kernel, started at rest on
     # u[0]) lands on z_target: z_i = A u_i + B with A = 1 - c, B = c u_{i-1} + e (z_{i-1} - u_{i-1}),
@@ -626,10 +635,7 @@ def _unlag_kernel(z_target, t, tau, lead, out):
     for i in range(1, n):
         dt = t[i] - tp
         if dt > 0.0:
-            e = math.exp(-dt / tau)
-            c = (1.0 - e) * tau / dt
-            a = 1.0 - c
-            b = c * u_prev + e * (z - u_prev)
+            a, b = _lag_affine(dt, tau, u_prev, z)
             u = (z_target[i] - b) / a
             if u > z_target[i] + lead:
                 u = z_target[i] + lead
@@ -657,10 +663,7 @@ def _uncreep_kernel(y_target, t, fraction, tau, out):
     for i in range(1, n):
         dt = t[i] - tp
         if dt > 0.0:
-            e = math.exp(-dt / tau)
-            c = (1.0 - e) * tau / dt
-            a = 1.0 - c
-            b = c * u_prev + e * (z - u_prev)
+            a, b = _lag_affine(dt, tau, u_prev, z)
             u = (y_target[i] - fraction * b) / (1.0 - fraction + fraction * a)
             z = a * u + b
         else:
