@@ -50,7 +50,7 @@ _META_FIELDS = ("controller", "shape", "motion", "trial", "catheter")
 _CONTROLLER_ORDER = ("none", "comp", "comp+shift")
 _MOTION_ORDER = ("sweep", "periodic", "nonperiodic")
 CONTROLLER_LABELS = {"none": "No Compensation", "comp": "Compensation-Only",
-                     "comp+shift": "Compensation+Shift"}
+                     "comp+shift": "Compensation+Shift", "comp+shift+diag": "Compensation+Shift+Diagnosis"}
 #: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
 CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}
 _EXTRA_COLOURS = ("tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 
+import pytest
+
 from typer.testing import CliRunner
 
 from hystcli.cli import app
@@ -43,7 +45,12 @@ def test_demo_json_and_files(tmp_path):
     assert res.exit_code == 0, res.output
     data = json.loads(res.stdout)
     assert data["format"] == "hyst-demo" and data["config"]["trials"] == 1
-    assert [c["controller"] for c in data["table_II"]] == ["none", "comp", "comp+shift"]
+    assert [c["controller"] for c in data["table_II"]] == ["none", "comp", "comp+shift", "comp+shift+diag"]
+    beyond = data["beyond_paper"]
+    assert [d["catheter"] for d in beyond["diagnoses"]] == ["ice-a", "ice-b"]
+    # targets: half the paper's Compensation+Shift RMSE (Kim & Mansi, Tables I and II)
+    assert [t["target"] for t in beyond["targets"]] == pytest.approx([3.95, 4.0, 5.05])
+    assert sorted(beyond["augmented_models"]) == ["ice-a", "ice-b"]
     cell = data["table_I"][0]
     assert cell["paper"]["source"] == "Kim & Mansi, Table I"
     assert cell["ratio"]["ptpe"] == cell["ptpe"]["mean"] / cell["paper"]["ptpe"]["mean"]
@@ -64,4 +71,15 @@ def test_demo_markdown_shows_paper_beside_ours(tmp_path):
     row = next(ln for ln in text.splitlines() if ln.startswith("| No Compensation | straight |"))
     assert "(57.2, 4.2)" in row and "(18.5, 3.4)" in row
     assert "paper values matched within 30%" in text
+    assert "**Beyond the paper: Compensation+Shift (C+S) with the model `hyst diagnose` augmented**" in text
+    # the paper's Compensation+Shift at alpha=45 (Kim & Mansi Table I: RMSE (7.9, 1.3)), target 7.9 / 2
+    row = next(ln for ln in text.splitlines() if ln.startswith("| alpha=45 | (7.9, 1.3) |"))
+    assert "<= 3.95" in row
     assert "demo took" in res.stderr
+
+
+def test_demo_without_diagnosis_has_only_the_papers_tables(tmp_path):
+    res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--no-diagnose", "--out",
+                              str(tmp_path / "o"), "--no-figures", "--quiet"])
+    assert res.exit_code == 0, res.output
+    assert "Table II" in res.stdout and "Beyond the paper" not in res.stdout
