@@ -13,7 +13,8 @@ WHERE
     largest energy-to-sample ratio is the dominant finding.
 
 WHICH
-    Every effect of :data:`hystcli.effects.EFFECTS` is a candidate. Each candidate's parameters
+    Every effect of :data:`hystcli.effects.EFFECTS` is a candidate (one driven by a stated
+    ``condition``, stretch, only when a run states one). Each candidate's parameters
     that move the tip (``contact``'s stiffness only moves the current) are searched on a grid over
     the type's ``bounds``: the SSE of every run at every grid point is one table, so a fit on any
     set of training runs is a weighted column sum and an argmin (no refit per fold). Whole runs
@@ -412,8 +413,22 @@ def _grid_axes(name: str) -> dict[str, np.ndarray]:
         return {"wall": np.concatenate([np.arange(-120.0, -1.0, 5.0), np.arange(5.0, 121.0, 5.0), [math.inf]])}
     if name == "latency":
         return {"delay": np.linspace(0.0, 1.0, 51)}
+    if name == "stretch":
+        # the offset compliance*(condition - reference) is what the runs see: a coarse reference
+        # grid (15 deg of condition) is enough, the joint simplex refines both
+        return {"compliance": np.linspace(-20.0, 20.0, 41), "reference": np.linspace(-90.0, 180.0, 19)}
     lo, hi = et.bounds[et.switch]  # pragma: no cover - a new effect type without a tuned grid
     return {et.switch: np.linspace(lo, hi, 41)}
+
+
+def _param_scale(name: str, p: str) -> float:
+    """Step scale of a parameter for the simplex: its typical value, or a tenth of its fitting
+    range when the typical value is 0 (stretch's reference: 0 for a catheter)."""
+    et = E.EFFECTS[name]
+    if et.typical[p] != 0.0:
+        return max(abs(et.typical[p]), 1e-3)
+    lo, hi = et.bounds[p]
+    return (hi - lo) / 10.0
 
 
 def _grid(name: str) -> list[dict[str, float]]:
@@ -501,7 +516,7 @@ def _fit(preps: Sequence[_Prep], w: np.ndarray, fixed: Sequence[E.Effect],
             lo, hi = et.bounds[p]
             if name == "contact":  # keep the wall on its side (a wall at 0 flips sides)
                 lo, hi = (lo, -1e-6) if v < 0 else (1e-6, hi)
-            scale = max(abs(et.typical[p]), 1e-3)
+            scale = _param_scale(name, p)
             slots.append((i, p, scale, lo, hi))
             x0.append(min(max(v, lo), hi) / scale)
 
@@ -889,7 +904,8 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         ``key=value``: test on the runs whose metadata ``key`` equals ``value``, train on the
         others. Default: leave one run out.
     candidates : sequence of str, optional
-        Effect names to try (default: every effect of :data:`hystcli.effects.EFFECTS`).
+        Effect names to try (default: every effect of :data:`hystcli.effects.EFFECTS`; those
+        whose driver is ``condition``, e.g. stretch, only when a run has ``condition`` metadata).
     max_effects : int
         Most effects the greedy selection adds.
     bootstrap : int
@@ -914,7 +930,11 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     base = E.as_effects(model.effects)
     have = {e.name for e in base}
     if candidates is None:
-        cands = [n for n in E.EFFECTS if n not in have]
+        # an effect driven by a stated condition (stretch under a load) is a default candidate
+        # only when some run states one: on catheter runs the shape's pull on the cable path is
+        # the shift of the dead zone (DESIGN.md section 3), which an output offset would duplicate
+        stated = any(E.run_condition(r.meta, n) is not None for r, n in zip(runs, names))
+        cands = [n for n in E.EFFECTS if n not in have and (stated or E.EFFECTS[n].driver != "condition")]
     else:
         cands = []
         for c in candidates:

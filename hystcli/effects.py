@@ -8,7 +8,8 @@ diagnosis fits, candidate by candidate, within each type's ``bounds``).
 
 The tip chain of one knob runs in fixed stages, whatever order the effects are listed in::
 
-    condition  friction, deadzone   knob parameters from the shaft shape (total curvature kappa)
+    condition  friction, deadzone,  knob parameters from the shaft shape (total curvature kappa)
+               stretch              or from the run's ``condition`` metadata (a load level)
     input      coupling, rate       the knob input x the hysteresis sees, from the commands
     hysteresis                      y_h = KnobModel.forward(x, y0)       (DESIGN.md section 3)
     output     saturation, creep    the physical tip, from y_h
@@ -22,6 +23,9 @@ friction       b -> b*g, omega -> omega/g, g = exp(mu*kappa), kappa=sum|alpha|  
                in rad (capstan law: the sheath eats tension exponentially)                     the shaft bends more
 deadzone       d_pos += width*kappa/2, d_neg -= width*kappa/2 (deg per rad)      width = 0     dead zone grows with curvature
                                                                                                (narrows for width < 0)
+stretch        h_pos, h_neg += compliance*(kappa - reference), both in rad:      compliance   the output (both envelopes) moves
+               the cable yields to the load the run states (its condition)      = 0           up by compliance per rad of condition
+                                                                                               above reference (down below it)
 coupling       x_k = q_k - gain*q_other (the other knob's command, deg/deg)      gain = 0      knob k's dead zone moves by gain*q_other
 rate           x = first-order lag of q, time constant tau (viscous sheath)      tau = 0       tip lags by tau*speed: the loop widens
                                                                                                by 2*tau*speed
@@ -32,6 +36,14 @@ contact        y = min(y, wall) (wall > 0) or max(y, wall) (wall < 0);          
                current += stiffness * (blocked tip)/omega                                      stiffness mA per deg of knob
 latency        y_reported(t) = y(t - delay)                                      delay = 0     reported tip late by exactly delay
 =============  ===============================================================  ============  =====================================
+
+``stretch`` is the effect of a steady load on a cable transmission: a torque ``T`` on the output
+stretches the cable by ``T/k`` and the output sits that much further along, whatever the input
+(real EndoWrist data, ``sample_data/real/STUDY.md``: about 0.1 deg per % of resistive torque).
+Both envelopes move by the same amount, so the dead zones and backlash widths stay as they are.
+Its driver is the run's ``condition`` metadata (the load), or the shape's total curvature for a
+catheter run; ``reference`` is the condition the base model was identified under (the model
+already holds the stretch there), so the shift is zero at the identification condition.
 
 On the forward model a pure input delay equals a pure output delay (the hysteresis is
 rate-independent), so ``rate`` is a first-order lag, not a delay: it also rounds the tip's
@@ -89,8 +101,8 @@ class EffectType:
     domain : mapping
         Physically valid range ``(lo, hi)`` per parameter (inclusive); outside it is an error.
     driver : str
-        What drives the effect: ``shape`` (run metadata), ``other knob``, ``speed``, ``time``,
-        ``tip``.
+        What drives the effect: ``shape`` (run metadata), ``condition`` (the run's ``condition``
+        metadata, else the shape's total curvature), ``other knob``, ``speed``, ``time``, ``tip``.
     summary : str
         The physics and the direction in one line.
     """
@@ -132,6 +144,10 @@ EFFECTS: Mapping[str, EffectType] = MappingProxyType({e.name: e for e in (
     EffectType("deadzone", "condition", ("width",), ("deg/rad",), "width", 0.0,
                {"width": 3.0}, {"width": (-4.0, 10.0)}, {"width": (-_INF, _INF)}, "shape",
                "dead zone widens by width * total curvature (rad), split evenly between its edges"),
+    EffectType("stretch", "condition", ("compliance", "reference"), ("deg/rad", "deg"), "compliance", 0.0,
+               {"compliance": 3.0, "reference": 0.0}, {"compliance": (-20.0, 20.0), "reference": (-90.0, 180.0)},
+               {"compliance": (-_INF, _INF), "reference": (-_INF, _INF)}, "condition",
+               "the cable yields to a load: the output moves by compliance * (condition - reference) (rad)"),
     EffectType("coupling", "input", ("gain",), ("deg/deg",), "gain", 0.0,
                {"gain": 0.15}, {"gain": (-0.5, 0.5)}, {"gain": (-_INF, _INF)}, "other knob",
                "the other knob's angle q_other shifts this knob's dead zone by gain * q_other"),
@@ -373,7 +389,10 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
 
     ``friction``: with g = exp(mu * kappa), kappa = total curvature in rad, the backlash widths
     are multiplied by g and omega divided by g. ``deadzone``: the edges move apart by
-    ``width * kappa`` in all. Returns ``knob`` itself (the same object) when neither is on.
+    ``width * kappa`` in all. ``stretch``: both heights move by
+    ``compliance * (kappa - reference)`` (reference in deg, converted to rad like kappa), which
+    moves both envelopes by that much. Returns ``knob`` itself (the same object) when none of
+    them changes anything.
     ``condition`` (deg), when given, replaces the shape's total curvature as the driver: other
     cable-driven data state their own condition (a resistive load, a frequency) in the run's
     ``condition`` metadata, scaled to degrees of curvature-equivalent.
@@ -384,11 +403,17 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
         When the changed parameters are no longer a valid model (names the condition).
     """
     on = _by_name(effects)
-    fr, dz = on.get("friction"), on.get("deadzone")
-    if fr is None and dz is None:
+    fr, dz, st = on.get("friction"), on.get("deadzone"), on.get("stretch")
+    if fr is None and dz is None and st is None:
         return knob
-    kappa = math.radians(shape.total_curvature if condition is None else condition)
-    if kappa == 0.0:
+    kdeg = shape.total_curvature if condition is None else condition
+    kappa = math.radians(kdeg)
+    # the output offset of a stretched cable (zero at the reference condition)
+    lift = 0.0 if st is None else st["compliance"] * math.radians(kdeg - st["reference"])
+    if lift != 0.0:
+        # equal heights keep dhat_pos, dhat_neg (they depend on h_pos - h_neg): a pure output shift
+        knob = KnobModel(**{**knob.params(), "h_pos": knob.h_pos + lift, "h_neg": knob.h_neg + lift})
+    if kappa == 0.0 or (fr is None and dz is None):
         return knob
     p = knob.params()
     if fr is not None:
@@ -404,7 +429,6 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
         return KnobModel(**p)
     except ModelError as exc:
         names = "+".join(e.name for e in (fr, dz) if e is not None)
-        kdeg = shape.total_curvature if condition is None else condition
         raise ModelError(f"effect {names} at total curvature {kdeg:g} deg: {exc}") from None
 
 

@@ -13,9 +13,11 @@ What real hardware logs need, learnt from that data set and handled here, not by
 - incremental encoders, whose zero is arbitrary: ``zero`` = ``none`` (default) / ``first`` /
   ``mean`` subtracts nothing, the first sample, or the mean of each input and output column. The
   default is ``none`` because the offset between runs of one session is information (the hysteresis
-  shift of DESIGN.md section 3 *is* an offset; on the MRDLab load series the mean jaw angle falls by
-  about 1.3 deg per 10 % of load torque), and the model absorbs any constant zero anyway (its
-  ``offset`` and heights). Use ``mean`` when every file was recorded after a fresh encoder reset;
+  shift of DESIGN.md section 3 *is* an offset; on the MRDLab data the flipped jaw angle rises by
+  about 1 deg per 10 % of load torque as the cable stretches: the ``stretch`` effect, driven by
+  the ``condition`` metadata the preset sets to the load), and the model absorbs any constant
+  zero anyway (its ``offset`` and heights). Use ``mean`` when every file was recorded after a
+  fresh encoder reset;
 - the sign of the gain: the least-squares slope of output on input is reported; a negative gain
   (the model needs the output to rise with the input) is a warning unless ``flip_output`` negates
   the output (and reference) columns;
@@ -421,6 +423,9 @@ MRDLAB = ImportMapping(
         MetaPattern(r"with a ([0-9.]+) Hz", "frequency_hz"),
         MetaPattern(r"amplitude of ([0-9.]+) degrees", "amplitude_deg"),
         MetaPattern(r"reaction torque of ([0-9.]+) percent", "load_pct"),
+        # the load is the run's condition: it drives the condition effects (stretch: the cable
+        # yields to the resistive torque; DESIGN.md section 8), as the shape does for a catheter
+        MetaPattern(r"reaction torque of ([0-9.]+) percent", "condition"),
     ),
     meta_from_readme=(
         MetaPattern(r"pitch of ([+-]?[0-9.]+) degrees", "pitch_deg"),

@@ -4,10 +4,11 @@
 Reads every ``load_freq/*.TXT.gz`` and ``pitch_*/*.TXT.gz`` of the MRDLab data set (by default
 ``<repo>/../shared/real/mrdlab``, see its PROVENANCE.md) with the built-in ``mrdlab`` preset of
 :mod:`hystcli.importer`, resamples to 200 Hz (anti-alias low-pass first) and rounds to 4 decimals
-so the whole copy stays a few MB, adds the condition metadata (``series``, ``condition``,
-``load_pct``, ``frequency_hz``, ``pitch_deg``; ``motion: periodic``; ``catheter:
-endowrist-tool5`` / ``endowrist-tool4``), writes one run CSV per file plus PROVENANCE.md (with its
-ODbL notice and a note on this conversion) and the folders' ReadME.txt, and prints a summary table.
+so the whole copy stays a few MB, adds the condition metadata (``series``, ``setting`` in words,
+``condition`` = ``load_pct`` (the driver of the condition effects), ``frequency_hz``,
+``pitch_deg``; ``motion: periodic``; ``catheter: endowrist-tool5`` / ``endowrist-tool4``), writes
+one run CSV per file plus PROVENANCE.md (with its ODbL notice and a note on this conversion) and
+the folders' ReadME.txt, and prints a summary table.
 
     python scripts/import_real.py                      # ../shared/real/mrdlab -> sample_data/real
     python scripts/import_real.py --src DIR --out DIR --rate 200 --zero none
@@ -47,11 +48,12 @@ derived database and stays under the ODbL 1.0 (contents: DbCL 1.0), with the att
   {cutoff:g} Hz, then linear interpolation; values rounded to {decimals} decimals.
 - Encoder zeros: `--zero {zero}`{zero_note}.
 - Metadata per run: `catheter` (endowrist-tool5 / endowrist-tool4), `motion: periodic`, `series`
-  (folder), `condition`, and from the file's header line `tool`, `spindle`, `frequency_hz`,
-  `amplitude_deg`, `load_pct` (resistive torque level, %), and from the folder's ReadME.txt
-  `pitch_deg`, `roll_deg`; `import` says how the file was converted. Every pitch_5 run carries a
-  `caution` with the owners' collision warning (their ReadME names `1##.TXT` files; which files of
-  this subset it meant is not certain).
+  (folder), `setting` (frequency, load and pitch in words), and from the file's header line `tool`,
+  `spindle`, `frequency_hz`, `amplitude_deg`, `load_pct` (resistive torque level, %) and
+  `condition` (the same load level: the driver of hyst's condition effects, e.g. `stretch`), and
+  from the folder's ReadME.txt `pitch_deg`, `roll_deg`; `import` says how the file was converted.
+  Every pitch_5 run carries a `caution` with the owners' collision warning (their ReadME names
+  `1##.TXT` files; which files of this subset it meant is not certain).
 - The torque, command and motor-encoder columns of the originals are not kept.
 """
 
@@ -80,7 +82,8 @@ def condition_meta(series: str, raw: Path) -> dict[str, str]:
     return meta
 
 
-def condition(meta: dict) -> str:
+def setting(meta: dict) -> str:
+    """The run's experimental setting in words (``condition`` itself is the load: a number)."""
     parts = [f"f={float(meta['frequency_hz']):g}Hz", f"load={float(meta['load_pct']):g}%"]
     if "pitch_deg" in meta:
         parts.append(f"pitch={float(meta['pitch_deg']):+g}")
@@ -104,7 +107,7 @@ def main(argv: list[str] | None = None) -> int:
             opts = importer.ImportOptions(zero=args.zero, resample=args.rate, decimals=args.decimals,
                                           meta=condition_meta(series, raw))
             imp = importer.convert(raw, mapping, opts, source=f"{series}/{raw.name}")
-            run = imp.run.with_meta(condition=condition(dict(imp.run.meta)))
+            run = imp.run.with_meta(setting=setting(dict(imp.run.meta)))
             done.append((series, raw, run, imp.report))
     except HystError as exc:
         print(f"Error: {exc}", file=sys.stderr)
@@ -127,7 +130,7 @@ def main(argv: list[str] | None = None) -> int:
     atomic_write_text(out / "PROVENANCE.md", (src / "PROVENANCE.md").read_text(encoding="utf-8").rstrip("\n")
                       + "\n" + note)
 
-    header = (f"{'file':<20} {'condition':<28} {'rows':>5} {'Hz':>5} {'q1 range':>15} {'y1 range':>17} "
+    header = (f"{'file':<20} {'setting':<28} {'rows':>5} {'Hz':>5} {'q1 range':>15} {'y1 range':>17} "
               f"{'gain':>6} {'drift':>8} {'lin RMSE':>8}")
     print(header)
     print("-" * len(header))
@@ -137,7 +140,7 @@ def main(argv: list[str] | None = None) -> int:
         coef = np.polyfit(q, y, 1)
         lin = float(np.sqrt(np.mean((np.polyval(coef, q) - y) ** 2)))
         k = rep.knobs[0]
-        print(f"{series + '/' + raw.name:<20} {run.meta['condition']:<28} {len(run):>5} {rep.rate_out:>5g} "
+        print(f"{series + '/' + raw.name:<20} {run.meta['setting']:<28} {len(run):>5} {rep.rate_out:>5g} "
               f"{q.min():>7.2f}..{q.max():<6.2f} {y.min():>8.2f}..{y.max():<7.2f} "
               f"{k.gain:>+6.3f} {k.drift:>+8.4f} {lin:>8.3f}")
         total += (out / series / importer.output_name(raw)).stat().st_size

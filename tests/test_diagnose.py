@@ -87,6 +87,41 @@ def test_effect_free_data_reports_no_effect_and_describes_the_residual():
     assert d.how_far.rmse_shrink_pct == 0.0
 
 
+def _load_runs(loads, stretch, seed=0):
+    """Sine runs of knob 1 at the given load conditions (metadata ``condition``), tip from the
+    model with ``stretch`` plus 0.2 deg of seeded noise."""
+    rng = np.random.default_rng(seed)
+    truth = Model(CAT.knobs, CAT.geometry, effects=(stretch.spec(),))
+    runs = []
+    for i, load in enumerate(loads):
+        run = Run({"t": T, "q1": _reference("periodic")[1]}, {"condition": f"{load:g}", "catheter": "ice-a",
+                                                            "trial": str(i + 1)}, f"load{load:g}")
+        y = E.predict(truth, run)[1] + rng.normal(0.0, 0.2, T.size)
+        runs.append(Run({**run.columns, "y1": y}, run.meta, run.source))
+    return runs
+
+
+def test_a_load_stretch_is_named_with_the_load_the_model_holds_at():
+    # the base model holds at 40 % (reference): the runs at 10 and 80 % sit lower and higher
+    truth = E.make_effect("stretch", compliance=4.0, reference=40.0)
+    d = diagnose(BASE, _load_runs((10.0, 40.0, 80.0), truth, seed=4), max_effects=1)
+    assert [s.name for s in d.selected] == ["stretch"]
+    fit = d.selected[0].params
+    assert abs(fit["compliance"] - 4.0) < 0.2 and abs(fit["reference"] - 40.0) < 3.0
+    # 4 deg/rad * 30 deg = 2.1 deg at 10 %, 2.8 deg at 80 %: the held-out error falls to the noise
+    assert d.how_far.rmse_before > 1.5 and d.how_far.rmse_after < 0.4
+
+
+def test_stretch_is_a_default_candidate_only_when_a_run_states_a_condition():
+    runs = make_runs((), seed=2)[:2]  # catheter runs: their condition is the shape
+    d = diagnose(BASE, runs, max_effects=1)
+    assert "stretch" not in {c.name for c in d.rounds[0].candidates}
+    d = diagnose(BASE, runs, candidates=["stretch"], max_effects=1)  # asked for: tried
+    assert [c.name for c in d.rounds[0].candidates] == ["stretch"]
+    stated = [runs[0].with_meta(condition="30"), runs[1]]
+    assert "stretch" in {c.name for c in diagnose(BASE, stated, max_effects=1).rounds[0].candidates}
+
+
 def test_latency_residual_sits_where_the_tip_moves_not_on_the_plateaus():
     # a delay changes the tip only where it moves: the backlash plateau and the dead zone (tip
     # held, paper lines L1/L5, L3/L7) carry less than their share of the residual energy

@@ -52,8 +52,9 @@ def _sim(effects, q, t, shape=Shape(), **kw):
 # registry and parsing
 # --------------------------------------------------------------------------------------------
 def test_registry_covers_design_section_8():
+    # the eight of DESIGN.md section 8, and stretch: the cable yielding to a stated load (issue 6)
     assert set(E.EFFECTS) == {"friction", "rate", "coupling", "deadzone", "creep", "latency",
-                              "saturation", "contact"}
+                              "saturation", "contact", "stretch"}
     for et in E.EFFECTS.values():
         assert 1 <= len(et.params) <= 2
         assert et.switch in et.params and et.stage in E.STAGES
@@ -313,3 +314,62 @@ def test_friction_that_breaks_the_model_is_an_error_naming_it():
     # g = exp(1 * pi) = 23.1: b_neg -> 34.7, dhat_pos = 0 - 2 + 34.7 > d_pos = 2
     with pytest.raises(ModelError, match="friction.*dhat_pos <= d_pos"):
         E.condition_knob(knob, (E.make_effect("friction", mu=1.0),), Shape.parse("alpha=180"))
+
+
+# --------------------------------------------------------------------------------------------
+# stretch: an output offset driven by the run's condition (a load), zero at the reference
+# --------------------------------------------------------------------------------------------
+def _stretch_run(condition: str | None, shape: str = "straight") -> Run:
+    t, q = _triangle(60.0, 40.0)
+    meta = {"shape": shape}
+    if condition is not None:
+        meta["condition"] = condition
+    return Run({"t": t, "q1": q}, meta)
+
+
+def test_stretch_moves_the_whole_output_by_compliance_times_condition_over_reference():
+    model = Model({1: K1})
+    run = _stretch_run("40")
+    base = E.predict(model, run)[1]
+    st = Model({1: K1}, effects=(E.make_effect("stretch", compliance=6.0, reference=10.0).spec(),))
+    y = E.predict(st, run)[1]
+    # by hand: 6 deg/rad * (40 - 10) deg = 6 * pi/6 rad = pi deg, the same on every line of the loop
+    # once the output has met an envelope (before that both hold the start y0 = 0)
+    met = np.arange(y.size) >= np.argmax(np.abs(run["q1"]) >= 30.0)
+    assert np.allclose(y[met] - base[met], math.pi, rtol=0, atol=1e-9)
+    assert np.max(np.abs(y - base)) <= math.pi + 1e-9
+    # the direction: more load (condition) moves the output further up; below reference, down
+    lower = E.predict(st, _stretch_run("0"))[1]
+    assert np.allclose(lower[met] - base[met], -6.0 * math.radians(10.0), rtol=0, atol=1e-9)
+
+
+def test_stretch_at_its_reference_or_off_is_the_base_model_bit_for_bit():
+    model = Model({1: K1.with_offset(2.0)})
+    for cond, eff in (("25", E.make_effect("stretch", compliance=6.0, reference=25.0)),
+                      ("80", E.make_effect("stretch", compliance=0.0, reference=-40.0))):
+        run = _stretch_run(cond)
+        y = E.predict(Model(model.knobs, effects=(eff.spec(),)), run)[1]
+        assert np.array_equal(y, model.knob(1).forward(run["q1"]))
+        assert E.condition_knob(K1, (eff,), Shape(), float(cond)) is K1
+
+
+def test_stretch_without_condition_metadata_follows_the_shape_curvature():
+    # a catheter run: the driver is the total curvature, like friction and deadzone
+    st = Model({1: K1}, effects=(E.make_effect("stretch", compliance=2.0).spec(),))
+    run = _stretch_run(None, "alpha=90,theta=0")
+    kn = E.condition_knob(K1, (E.make_effect("stretch", compliance=2.0),), Shape.parse("alpha=90,theta=0"))
+    # 2 deg/rad * pi/2 rad = pi deg on both heights, nothing else changed
+    assert kn.h_pos == pytest.approx(K1.h_pos + math.pi, abs=1e-12)
+    assert kn.h_neg == pytest.approx(K1.h_neg + math.pi, abs=1e-12)
+    assert (kn.d_pos, kn.d_neg, kn.b_pos, kn.b_neg, kn.omega) == (K1.d_pos, K1.d_neg, K1.b_pos, K1.b_neg, K1.omega)
+    assert np.array_equal(E.predict(st, run)[1], kn.forward(run["q1"]))
+
+
+def test_inverse_with_stretch_undoes_it_exactly():
+    t = np.arange(0, 20.0, 0.01)
+    r = 40 * np.sin(2 * np.pi * 0.1 * t)
+    model = Model({1: K1}, effects=(E.make_effect("stretch", compliance=5.0, reference=20.0).spec(),))
+    traj = Run({"t": t, "r1": r}, {"condition": "70"})
+    q = E.inverse(model, traj).q[1]
+    y = E.predict(model, Run({"t": t, "q1": q}, traj.meta))[1]
+    assert np.allclose(y, r, rtol=0, atol=1e-9)

@@ -66,6 +66,8 @@ def test_preset_metadata_from_header(load41):
     assert meta["frequency_hz"] == "0.50"
     assert meta["amplitude_deg"] == "30.00"
     assert meta["load_pct"] == "20.00"
+    # the load is the run's condition, the driver of the condition effects (DESIGN.md section 8)
+    assert meta["condition"] == "20.00"
     assert meta["spindle"] == "left"
     assert meta["motion"] == "periodic"
     assert meta["current_unit"] == "A"
