@@ -1,25 +1,36 @@
 """Benchmark of the live loop: host-side overhead per step, round trips over a pseudo-terminal,
 and Algorithm 1 run live (steps, knob travel, offset error) against `hyst sim-robot`.
 
-Run: ``python bench/bench_live.py`` (about 20 s). Target (issue 4): host-side overhead per step,
-excluding the device's own time, under 1 ms.
+Run: ``python bench/bench_live.py`` (about 3 min; ``--seeds N`` for the offline accuracy
+section, 10 by default). Target (issue 4): host-side overhead per step, excluding the device's
+own time, under 1 ms; the live offset within 0.5 deg of the twin's true shift.
+
+The robot is the catheter `hyst sim-robot` serves: the calibrated one of `hyst simulate`
+(``calibration.calibrated_catheter``) with its default effects (creep, friction, rate,
+coupling) unless a line says ``none``. The search is what `hyst detect-shift --port` runs:
+``device.open_probe`` with its defaults (step-and-dwell: each 0.5 deg step holds 0.35 s and reads
+the mean current of the last 0.3 s, protocol features ``dwell`` and ``mean``), thresholds from
+the model's identification.
 
 1. host overhead: the driver talks to the device-side protocol handler in-process through a
    pyserial-like object; the time spent inside the device (handler + twin) is measured and
    subtracted, leaving encode + write + read + decode + checks on the host;
 2. round trip over a real pty with ``hyst sim-robot`` in another process (what a step costs end
-   to end: pty, device, twin), and the same with a DeviceProbe step;
-3. detect-shift live over the pty per shape: steps, travel, time, offset error;
-4. the search as `hyst detect-shift --port` runs it (model thresholds from the identification,
-   default options, one connection per knob) over a pty to `hyst sim-robot`: total knob travel
-   and steps per shape, offset error over several seeds at the device's default knob speed
-   (20 deg/s) and at 5 deg/s (the causal 20 Hz current filter lags ~16 ms, i.e. ~0.3 deg at
-   20 deg/s, in the direction of motion);
-5. host-side overhead per step of the whole search (Algorithm 1's own computation + driver:
-   encode, write, read, decode, checks), the device's time subtracted (in-process port).
+   to end: pty, device, twin; the emulator does not wait out the simulated motion and dwell);
+3. detect-shift live over a pty to ``hyst sim-robot`` per shape: steps, knob travel, error;
+4. accuracy over many seeds: the same emulator and driver code in-process (a pty only adds
+   transport time, the numbers are the same), 10 seeds x 4 shapes x 2 knobs per catheter and
+   effect set: the offset error against ``true_offsets`` (paper eqs. 1-4);
+5. why step-and-dwell: the same searches with single instantaneous samples and with the mean
+   current taken while the knob moves, with and without the default effects: the noise of one
+   sample, and the late edge of a moving reading (the ``rate`` effect's lag of the tendon
+   behind the knob, tau = 25 ms, plus the causal filter's delay: speed x lag);
+6. host-side overhead per step of the whole search (Algorithm 1's own computation + driver),
+   the device's time subtracted (in-process port, no pty).
 """
 from __future__ import annotations
 
+import argparse
 import select
 import signal
 import subprocess
@@ -28,12 +39,16 @@ import time
 
 import numpy as np
 
-from hystcli.device import Device, DeviceProbe, decode_frame, encode_frame
+from hystcli.calibration import calibrated_catheter
+from hystcli.device import (DEFAULT_DWELL, DEFAULT_MEAN, Device, DeviceProbe, decode_frame,
+                            encode_frame, open_probe)
 from hystcli.emulator import DeviceEmulator
-from hystcli.model import Shape
-from hystcli.twin import LiveTwin, get_catheter
+from hystcli.model import KnobIdentification, Model, Shape
+from hystcli.shift import detect_shift
+from hystcli.twin import LiveTwin
 
 N = 3000
+SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=180", "alpha=45,theta=0;alpha=45,theta=90")
 
 
 class DirectPort:
@@ -63,12 +78,23 @@ class DirectPort:
         return chunk
 
 
+def identified_model(cat) -> Model:
+    """The catheter's straight-shaft model with the identification `hyst identify` stores for
+    detect-shift (dead-zone slope ~0.5 mA/deg, loaded k_load, dead-zone current = no-load)."""
+    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cat.current.k_load, q_min=-40.0,
+                                   q_max=40.0, current_dead_zone=cat.current.no_load) for k in (1, 2)}
+    return Model(dict(cat.knobs), cat.geometry, identification=ident)
+
+
+def direct_device(cat, shape: str = "straight", effects=None, seed: int = 0) -> tuple[Device, DirectPort]:
+    port = DirectPort(DeviceEmulator(LiveTwin(cat, shape=Shape.parse(shape), effects=effects, seed=seed)))
+    return Device(port, timeout=1.0), port
+
+
 def host_overhead() -> None:
-    cat = get_catheter("ice-a")
-    port = DirectPort(DeviceEmulator(LiveTwin(cat, seed=0)))
-    dev = Device(port, timeout=1.0)
+    cat = calibrated_catheter("ice-a")
+    dev, port = direct_device(cat)
     qs = 10 * np.sin(np.linspace(0, 20 * np.pi, N))
-    port.device_time = 0.0
     per = []
     for q in qs:
         d0 = port.device_time
@@ -76,27 +102,30 @@ def host_overhead() -> None:
         dev.move(1, float(q), 20.0)
         per.append((time.perf_counter() - t0) - (port.device_time - d0))
     per_us = np.array(per) * 1e6
-    print(f"1. host-side overhead per MOVE step ({N} steps, device time subtracted):")
+    print(f"1. host-side overhead per MOVE ({N} plain MOVEs, device time subtracted):")
     print(f"   median {np.median(per_us):7.1f} us   p99 {np.percentile(per_us, 99):7.1f} us   "
           f"max {per_us.max():7.1f} us   (target < 1000 us)")
     t0 = time.perf_counter()
     for i in range(N):
-        encode_frame(i, "MOVE", 1, 1.2345, 20.0)
+        encode_frame(i, "MOVE", 1, 1.2345, 20.0, "dwell=0.3500", "mean=0.3000")
     enc = (time.perf_counter() - t0) / N * 1e6
-    frame = encode_frame(7, "POS", 1, 1.2345, 130.25, 0.75)
+    frame = encode_frame(7, "POS", 1, 1.2345, 130.25, 0.75, "qmean=1.2345", "cmean=130.1000", "tmean=0.3000")
     t0 = time.perf_counter()
     for _ in range(N):
         decode_frame(frame)
     dec = (time.perf_counter() - t0) / N * 1e6
-    print(f"   of which: encode {enc:.1f} us, decode {dec:.1f} us per frame")
+    print(f"   of which: encode {enc:.1f} us (step-and-dwell MOVE), decode {dec:.1f} us "
+          "(POS with the mean) per frame")
     probe = DeviceProbe(dev, 1, current_ceiling=5000.0)
-    per = []
+    per, dev_ms = [], []
     for q in np.arange(0, 20, 0.5):
         d0 = port.device_time
         t0 = time.perf_counter()
         probe.step_to(float(q))
         per.append((time.perf_counter() - t0) - (port.device_time - d0))
-    print(f"   DeviceProbe.step_to host overhead: median {np.median(per) * 1e6:.1f} us")
+        dev_ms.append(port.device_time - d0)
+    print(f"   DeviceProbe.step_to (step-and-dwell, averaged={probe.averaged}) host overhead: median "
+          f"{np.median(per) * 1e6:.1f} us; the emulator's own compute per step {np.median(dev_ms) * 1e3:.1f} ms")
 
 
 def start_sim_robot(*args: str) -> tuple[subprocess.Popen, str]:
@@ -126,101 +155,108 @@ def pty_round_trip() -> None:
                     dev.move(1, float(q), 20.0)
                     per.append(time.perf_counter() - t0)
                 per_ms = np.array(per) * 1e3
-        finally:
-            stop(proc)
-        print(f"2. round trip over a pty to `hyst sim-robot --latency-ms {latency}` (500 MOVEs, "
-              f"device and twin included): median {np.median(per_ms):.3f} ms, "
-              f"p99 {np.percentile(per_ms, 99):.3f} ms")
-
-
-def live_detect_shift() -> None:
-    from hystcli.shift import detect_shift
-
-    cat = get_catheter("ice-a")
-    model = cat.true_model()
-    print("3. Algorithm 1 live over a pty (`hyst sim-robot`, ice-a, seed 2; eps_lower 2, "
-          "eps_upper 30 mA/deg, step 0.5 deg, current_dead_zone = no-load 120 mA):")
-    print(f"   {'shape':38s} knob  offset  true   error  steps  travel  ms/step")
-    for shape in ("straight", "alpha=45,theta=0", "alpha=90,theta=0", "alpha=45,theta=0;alpha=45,theta=90"):
-        proc, path = start_sim_robot("--shape", shape, "--seed", "2")
-        try:
-            with Device(path, timeout=1.0) as dev:
-                for k in (1, 2):
-                    probe = DeviceProbe(dev, k, current_ceiling=2000.0)
+                dwell = []
+                for q in np.arange(0.5, 10.5, 0.5):
                     t0 = time.perf_counter()
-                    try:
-                        r = detect_shift(model, probe, k, eps_lower=2.0, eps_upper=30.0,
-                                         current_dead_zone=cat.current.no_load, max_travel=60.0)
-                    except Exception as exc:  # noqa: BLE001 - report and go on
-                        print(f"   {shape:38s} {k}     failed: {exc}")
-                        continue
-                    el = time.perf_counter() - t0
-                    true = cat.true_offsets(Shape.parse(shape))[k]
-                    print(f"   {shape:38s} {k}   {r.offset:6.2f} {true:6.2f} {r.offset - true:+6.2f} "
-                          f"{r.steps:6d} {r.travel:7.1f} {el / max(r.steps, 1) * 1e3:8.2f}")
+                    dev.move(1, float(q), 5.0, dwell=DEFAULT_DWELL, mean=DEFAULT_MEAN)
+                    dwell.append(time.perf_counter() - t0)
         finally:
             stop(proc)
+        print(f"2. round trip over a pty to `hyst sim-robot --latency-ms {latency}` (device and twin "
+              f"included): plain MOVE (500) median {np.median(per_ms):.3f} ms, p99 "
+              f"{np.percentile(per_ms, 99):.3f} ms; step-and-dwell MOVE (20) median "
+              f"{np.median(dwell) * 1e3:.2f} ms")
 
 
-SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=180", "alpha=45,theta=0;alpha=45,theta=90")
-
-
-def identified_model(cat=None):
-    """The twin's straight-shaft model with the identification `hyst identify` stores for
-    detect-shift (dead-zone slope ~0.5 mA/deg, loaded k_load, dead-zone current = no-load)."""
-    from hystcli.model import KnobIdentification, Model
-
-    cat = cat or get_catheter("ice-a")
-    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cat.current.k_load, q_min=-40.0,
-                                   q_max=40.0, current_dead_zone=cat.current.no_load) for k in (1, 2)}
-    return Model(dict(cat.knobs), cat.geometry, identification=ident)
-
-
-def cli_search_over_pty(seeds: int = 5) -> None:
-    from hystcli.device import open_probe
-    from hystcli.shift import detect_shift
-
-    cat = get_catheter("ice-a")
+def live_detect_over_pty(seeds: int = 3) -> None:
+    cat = calibrated_catheter("ice-a")
     model = identified_model(cat)
-    print(f"4. detect-shift --port path (open_probe per knob, thresholds from the model, step 0.5 deg, "
-          f"max-travel 40) over a pty to `hyst sim-robot`, ice-a, seeds 0-{seeds - 1}:")
-    print(f"   {'shape':38s} knob speed  steps(mean/max) travel(mean/max)  err mean  |err| max  ms/step")
+    print(f"3. detect-shift --port path (open_probe per knob, defaults: step 0.5 deg, speed 5 deg/s, "
+          f"dwell {DEFAULT_DWELL:g} s, mean {DEFAULT_MEAN:g} s; max-travel 40) over a pty to "
+          f"`hyst sim-robot` (ice-a, default effects), seeds 0-{seeds - 1}:")
+    print(f"   {'shape':38s} knob  steps(mean/max)  travel deg(mean/max)  err mean  |err| max  "
+          "wall ms/step")
     for shape in SHAPES:
         true = cat.true_offsets(Shape.parse(shape))
-        rows = {(k, sp): [] for k in (1, 2) for sp in (None, 5.0)}
+        rows = {k: [] for k in (1, 2)}
         for seed in range(seeds):
-            for speed in (None, 5.0):
-                proc, path = start_sim_robot("--shape", shape, "--seed", str(seed))
-                try:
-                    for k in (1, 2):
-                        probe = open_probe(path, 115200, k, speed=speed)
-                        try:
-                            t0 = time.perf_counter()
-                            r = detect_shift(model, probe, k, max_travel=40.0)
-                            el = time.perf_counter() - t0
-                        finally:
-                            probe.device.close()
-                        rows[(k, speed)].append((r.steps, r.travel, r.offset - true[k], el / (r.steps + 1)))
-                finally:
-                    stop(proc)
-        for (k, speed), vals in rows.items():
+            proc, path = start_sim_robot("--shape", shape, "--seed", str(seed))
+            try:
+                for k in (1, 2):
+                    probe = open_probe(path, 115200, k, speed=5.0, current_ceiling=2000.0)
+                    try:
+                        t0 = time.perf_counter()
+                        r = detect_shift(model, probe, k, max_travel=40.0)
+                        el = time.perf_counter() - t0
+                    finally:
+                        probe.device.close()
+                    rows[k].append((r.steps, r.travel, r.offset - true[k], el / (r.steps + 1)))
+            finally:
+                stop(proc)
+        for k, vals in rows.items():
             a = np.array(vals)
-            print(f"   {shape:38s} {k:4d} {speed or 20:5.0f}  {a[:, 0].mean():6.1f}/{a[:, 0].max():3.0f}"
-                  f"     {a[:, 1].mean():6.1f}/{a[:, 1].max():5.1f}     {a[:, 2].mean():+6.2f}"
-                  f"   {np.abs(a[:, 2]).max():8.2f}  {a[:, 3].mean() * 1e3:7.2f}")
+            print(f"   {shape:38s} {k:4d}  {a[:, 0].mean():6.1f}/{a[:, 0].max():3.0f}"
+                  f"       {a[:, 1].mean():6.1f}/{a[:, 1].max():5.1f}      {a[:, 2].mean():+6.3f}"
+                  f"   {np.abs(a[:, 2]).max():8.3f}  {a[:, 3].mean() * 1e3:9.2f}")
+
+
+def search_errors(cat, effects, seeds, speed: float = 5.0, dwell=DEFAULT_DWELL, mean=DEFAULT_MEAN,
+                  shapes=SHAPES) -> list[tuple[str, int, int, float, int, float]]:
+    """(shape, seed, knob, error, steps, travel) of every search, in-process."""
+    model = identified_model(cat)
+    out = []
+    for shape in shapes:
+        true = cat.true_offsets(Shape.parse(shape))
+        for seed in seeds:
+            dev, _ = direct_device(cat, shape, effects, seed)
+            for k in (1, 2):
+                probe = DeviceProbe(dev, k, current_ceiling=2000.0, speed=speed, dwell=dwell, mean=mean)
+                r = detect_shift(model, probe, k, max_travel=40.0)
+                out.append((shape, seed, k, r.offset - true[k], r.steps, r.travel))
+    return out
+
+
+def accuracy_offline(seeds: int) -> None:
+    print(f"4. offset error over seeds 0-{seeds - 1} x {len(SHAPES)} shapes x 2 knobs (the emulator "
+          "and driver in-process; step-and-dwell defaults, 5 deg/s, max-travel 40):")
+    print(f"   {'catheter':9s} {'effects':8s} {'n':>4s}  err mean   std   |err| max  at (shape, seed, knob)")
+    worst_all = 0.0
+    for name in ("ice-a", "ice-b"):
+        cat = calibrated_catheter(name)
+        for label, effects in (("default", None), ("none", ())):
+            rows = search_errors(cat, effects, range(seeds))
+            e = np.array([r[3] for r in rows])
+            w = max(rows, key=lambda r: abs(r[3]))
+            worst_all = max(worst_all, abs(w[3]))
+            print(f"   {name:9s} {label:8s} {len(rows):4d}  {e.mean():+7.3f} {e.std():6.3f}  {abs(w[3]):8.3f}"
+                  f"   ({w[0]}, {w[1]}, {w[2]})")
+    print(f"   worst |error| over all: {worst_all:.3f} deg (target 0.5)")
+
+
+def probe_modes(seeds: int = 3) -> None:
+    cat = calibrated_catheter("ice-a")
+    print(f"5. probe readings compared (ice-a, 5 deg/s: a 0.5 deg step moves for 0.1 s; seeds "
+          f"0-{seeds - 1} x {len(SHAPES)} shapes x 2 knobs):")
+    print(f"   {'reading':44s} {'effects':8s} err mean   std   |err| max")
+    modes = (("single sample on arrival (base protocol)", None, None),
+             ("mean over the step's motion (mean=0.1)", 0.0, 0.1),
+             (f"step-and-dwell (dwell={DEFAULT_DWELL:g}, mean={DEFAULT_MEAN:g})", DEFAULT_DWELL, DEFAULT_MEAN))
+    for label, dwell, mean in modes:
+        for eff_label, effects in (("default", None), ("none", ())):
+            e = np.array([r[3] for r in search_errors(cat, effects, range(seeds), dwell=dwell, mean=mean)])
+            print(f"   {label:44s} {eff_label:8s} {e.mean():+7.3f} {e.std():6.3f}  {np.abs(e).max():8.3f}")
+    print("   (a positive mean error is an edge read late; the rate effect's lag alone: "
+          "5 deg/s x 25 ms = 0.125 deg)")
 
 
 def search_host_overhead() -> None:
-    from hystcli.shift import detect_shift
-
-    cat = get_catheter("ice-a")
+    cat = calibrated_catheter("ice-a")
     model = identified_model(cat)
-    print("5. host-side overhead per step of the whole search (Algorithm 1 + driver), device time "
-          "subtracted (in-process port, no pty):")
+    print("6. host-side overhead per step of the whole search (Algorithm 1 + driver), device time "
+          "subtracted (in-process port, no pty), steps and travel per knob:")
     for shape in SHAPES:
-        port = DirectPort(DeviceEmulator(LiveTwin(cat, shape=Shape.parse(shape), seed=0)))
-        dev = Device(port, timeout=1.0)
-        per, steps = [], 0
+        dev, port = direct_device(cat, shape)
+        per, info = [], []
         for k in (1, 2):
             probe = DeviceProbe(dev, k)
             d0 = port.device_time
@@ -229,14 +265,18 @@ def search_host_overhead() -> None:
             host = (time.perf_counter() - t0) - (port.device_time - d0)
             moves = r.steps + 1  # the return home is one more MOVE
             per.append(host / moves)
-            steps += moves
-        print(f"   {shape:38s} {steps:4d} MOVEs   host {np.mean(per) * 1e6:7.1f} us/step "
-              f"(knob 1 {per[0] * 1e6:.1f}, knob 2 {per[1] * 1e6:.1f})   target < 1000 us")
+            info.append(f"knob {k}: {r.steps} steps, {r.travel:.1f} deg")
+        print(f"   {shape:38s} host {np.mean(per) * 1e6:7.1f} us/step (knob 1 {per[0] * 1e6:.1f}, "
+              f"knob 2 {per[1] * 1e6:.1f}; target < 1000 us)   {'; '.join(info)}")
 
 
 if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=10, help="seeds of the offline accuracy section")
+    args = ap.parse_args()
     host_overhead()
     pty_round_trip()
-    live_detect_shift()
-    cli_search_over_pty()
+    live_detect_over_pty()
+    accuracy_offline(args.seeds)
+    probe_modes()
     search_host_overhead()

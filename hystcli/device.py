@@ -13,7 +13,9 @@ Owns three things:
   corrupt or malformed frame, disconnect);
 * :class:`DeviceProbe`, the live probe of Algorithm 1 (``hystcli.shift``): step one knob, read
   its motor current, with a current ceiling (contact) that stops every motor and raises
-  :class:`~hystcli.errors.SafetyStop`.
+  :class:`~hystcli.errors.SafetyStop`. It steps and dwells, reading the mean current over the
+  dwell, when the device offers the optional protocol features ``dwell`` and ``mean``
+  (:data:`FEATURES`), as the replay probe averages the current over each step.
 
 The core never prints; the CLI (``hystcli/cli/device_cmds.py``) renders.
 """
@@ -31,6 +33,13 @@ import numpy as np
 from .errors import DeviceError, LinkError, SafetyStop
 
 PROTOCOL_VERSION = 1
+FEATURES = ("dwell", "mean")
+"""Optional features of protocol 1 this host understands (docs/protocol.md, "Optional
+features"): ``dwell`` (``MOVE ... dwell=S``: hold the target S seconds before answering) and
+``mean`` (``MOVE ... mean=S``: the reply adds the mean knob angle and motor current over the
+last S seconds before it). A device announces the ones it has in its handshake; they were added
+without a version bump because neither side sends them unless both know them."""
+MAX_DWELL = 10.0         # s: the longest dwell and averaging window a MOVE may ask for
 MAX_FRAME = 160          # bytes, newline included; longer lines are a framing error
 SEQ_MODULO = 65536       # sequence numbers run 0..65535 and wrap
 NO_SEQ = None            # the ``?`` sequence of a device reply to a frame it could not decode
@@ -103,6 +112,7 @@ class Frame:
 _VERB = re.compile(r"[A-Z][A-Z0-9_]{0,15}\Z")
 _SEQ = re.compile(r"[0-9]{1,5}\Z")
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+(?:\.[0-9]*)?|\.[0-9]+)(?:[eE][+-]?[0-9]{1,3})?\Z")
+_FEATURE = re.compile(r"[a-z][a-z0-9_]{0,15}\Z")
 
 
 def _check_field(text: str, what: str) -> None:
@@ -247,6 +257,9 @@ class DeviceInfo:
         Whether replies carry a measured tip angle (EM tracker).
     extra : mapping of str to str
         Any other ``key=value`` the device sent (kept, never an error).
+    features : tuple of str
+        Optional protocol features the device announced (``features=dwell,mean``): the ``MOVE``
+        options it accepts (:data:`FEATURES`). Empty for a device of the base protocol.
     """
 
     protocol: int
@@ -255,9 +268,15 @@ class DeviceInfo:
     knobs: tuple[int, ...]
     tracker: bool
     extra: Mapping[str, str] = field(default_factory=dict)
+    features: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "extra", MappingProxyType(dict(self.extra)))
+        object.__setattr__(self, "features", tuple(self.features))
+
+    def has(self, feature: str) -> bool:
+        """Whether the device announced the optional protocol feature ``feature``."""
+        return feature in self.features
 
     def as_meta(self) -> dict[str, str]:
         """Run metadata describing the device (``device``, ``device_protocol``, ...)."""
@@ -265,6 +284,8 @@ class DeviceInfo:
                 "device_catheter": self.catheter,
                 "device_knobs": ",".join(str(k) for k in self.knobs),
                 "device_tracker": "yes" if self.tracker else "no"}
+        if self.features:
+            meta["device_features"] = ",".join(self.features)
         meta.update({f"device_{k}": v for k, v in self.extra.items()})
         return meta
 
@@ -272,6 +293,8 @@ class DeviceInfo:
         """The handshake reply fields (used by the device side)."""
         out = [str(self.protocol), f"name={self.name}", f"catheter={self.catheter}",
                "knobs=" + ",".join(str(k) for k in self.knobs), f"tracker={int(self.tracker)}"]
+        if self.features:
+            out.append("features=" + ",".join(self.features))
         out += [f"{k}={v}" for k, v in self.extra.items()]
         return out
 
@@ -296,7 +319,15 @@ class DeviceInfo:
         tracker = kv.pop("tracker")
         if tracker not in ("0", "1"):
             raise FrameError(f"handshake tracker={tracker!r} is not 0 or 1")
-        return cls(int(args[0]), kv.pop("name"), kv.pop("catheter"), knobs, tracker == "1", kv)
+        features: tuple[str, ...] = ()
+        words = tuple(kv.get("features", "").split(","))
+        if "features" in kv and all(_FEATURE.match(f) for f in words):
+            features = words
+            del kv["features"]
+        # else: not a feature list of this protocol (a device's own key of that name, from
+        # before the optional features): kept as an unknown key, as every other one, no error
+        return cls(int(args[0]), kv.pop("name"), kv.pop("catheter"), knobs, tracker == "1", kv,
+                   features)
 
 
 @dataclass(frozen=True)
@@ -312,21 +343,59 @@ class Sample:
         Motor current (mA).
     tip : float or None
         Tip bending angle from the tracker (deg); None when the device has none.
+    mean_angle, mean_current, mean_time : float or None
+        The mean knob angle (deg) and motor current (mA) over the averaging window a
+        ``MOVE ... mean=S`` asked for, and the time averaged (s); None otherwise (feature
+        ``mean``).
     """
 
     knob: int
     angle: float
     current: float
     tip: float | None
+    mean_angle: float | None = None
+    mean_current: float | None = None
+    mean_time: float | None = None
+
+    @property
+    def averaged(self) -> bool:
+        """Whether the reply carried the mean current of an averaging window (``cmean=``)."""
+        return self.mean_current is not None
+
+
+# the optional fields of a POS reply (feature "mean"): name -> (Sample attribute, what)
+_POS_OPTIONS = {"qmean": ("mean_angle", "mean knob angle"),
+                "cmean": ("mean_current", "mean motor current"),
+                "tmean": ("mean_time", "averaging time")}
 
 
 def parse_pos(args: tuple[str, ...]) -> Sample:
-    """Parse the fields of a ``POS`` reply: ``KNOB ANGLE CURRENT TIP`` (``TIP`` may be ``-``)."""
-    if len(args) != 4:
-        raise FrameError(f"POS reply has {len(args)} fields, expected 4 (knob angle current tip)")
+    """Parse the fields of a ``POS`` reply: ``KNOB ANGLE CURRENT TIP [key=value ...]``.
+
+    ``TIP`` may be ``-`` (no tracker). The optional fields ``qmean=``, ``cmean=`` and
+    ``tmean=`` (feature ``mean``, docs/protocol.md) fill the ``mean_*`` attributes; other
+    ``key=value`` fields are ignored, so that a later optional field never breaks this host.
+    """
+    if len(args) < 4 or any("=" in a for a in args[:4]):
+        raise FrameError(f"POS reply has {sum('=' not in a for a in args)} positional fields, "
+                         "expected 4 (knob angle current tip)")
     tip = None if args[3] == "-" else parse_number(args[3], "tip angle")
+    extra: dict[str, float] = {}
+    for a in args[4:]:
+        key, sep, value = a.partition("=")
+        if not sep or not key:
+            raise FrameError(f"POS reply field {a!r} after the 4 positional ones is not key=value")
+        if key in _POS_OPTIONS:
+            attr, what = _POS_OPTIONS[key]
+            if attr in extra:
+                raise FrameError(f"POS reply repeats {key}=")
+            extra[attr] = parse_number(value, what)
+    if ("mean_angle" in extra) != ("mean_current" in extra):
+        raise FrameError("POS reply has only one of qmean= and cmean= (a mean comes as both)")
+    if extra.get("mean_time", 0.0) < 0:
+        raise FrameError(f"POS reply has a negative averaging time tmean={extra['mean_time']:g}")
     return Sample(parse_knob(args[0]), parse_number(args[1], "knob angle"),
-                  parse_number(args[2], "motor current"), tip)
+                  parse_number(args[2], "motor current"), tip, **extra)
 
 
 # --------------------------------------------------------------------------------------------
@@ -458,7 +527,8 @@ class Device:
         self.info = info
         return info
 
-    def move(self, knob: int, angle: float, speed: float | None = None) -> Sample:
+    def move(self, knob: int, angle: float, speed: float | None = None, *,
+             dwell: float | None = None, mean: float | None = None) -> Sample:
         """Move ``knob`` to ``angle`` (deg) and return where it got, its current and the tip.
 
         Parameters
@@ -468,6 +538,18 @@ class Device:
             Target knob angle (deg).
         speed : float, optional
             Knob speed (deg/s); the device's default when omitted.
+        dwell : float, optional
+            Hold the knob at the target this long (s) before the reply (feature ``dwell``), so
+            that what lags the knob (the tendon's viscous lag, the current filter) settles.
+        mean : float, optional
+            Also report the mean knob angle and motor current over the last ``mean`` seconds
+            before the reply, the dwell included, never before the move began (feature
+            ``mean``): ``Sample.mean_angle``, ``Sample.mean_current``, ``Sample.mean_time``.
+
+        Raises
+        ------
+        DeviceError
+            A bad argument, or an option the device did not announce in its handshake.
         """
         angle = float(angle)
         if not math.isfinite(angle):
@@ -477,7 +559,36 @@ class Device:
             if not (speed > 0 and math.isfinite(speed)):
                 raise DeviceError(f"knob speed must be positive and finite, got {speed!r}")
             args.append(float(speed))
-        return self._pos(self._request("MOVE", *args, expect="POS"), knob)
+        for option, value, lo_ok in (("dwell", dwell, True), ("mean", mean, False)):
+            if value is None:
+                continue
+            if not (math.isfinite(value) and (value >= 0 if lo_ok else value > 0)
+                    and value <= MAX_DWELL):
+                raise DeviceError(f"MOVE option {option} must be {'>= 0' if lo_ok else '> 0'} and "
+                                  f"<= {MAX_DWELL:g} s, got {value!r}")
+            self._require(option)
+            args.append(f"{option}={value:.4f}")
+        # the reply comes after the dwell: the deadline counts from the request, so it grows by it
+        timeout = self.timeout + (dwell or 0.0)
+        sample = self._pos(self._request("MOVE", *args, expect="POS", timeout=timeout), knob)
+        if mean is not None and not sample.averaged:
+            raise FrameError(f"MOVE asked device {self._name()} for a mean current (mean=) and its "
+                             "reply carries none (no cmean=)")
+        return sample
+
+    def supports(self, feature: str) -> bool:
+        """Whether the device announced the optional protocol feature ``feature`` (False
+        before the handshake)."""
+        return self.info is not None and self.info.has(feature)
+
+    def _require(self, feature: str) -> None:
+        if not self.supports(feature):
+            have = ",".join(self.info.features) if self.info is not None and self.info.features else "none"
+            raise DeviceError(f"device {self._name()} does not offer the protocol feature "
+                              f"{feature!r} (its features: {have})")
+
+    def _name(self) -> str:
+        return self.info.name if self.info is not None else self.port_name
 
     def state(self, knob: int) -> Sample:
         """Read ``knob``'s angle, motor current and tip angle without moving it."""
@@ -606,8 +717,30 @@ class ProbeReading:
     tip: float | None
 
 
+DEFAULT_DWELL = 0.35
+"""Default hold at each search step (s), feature ``dwell``. The averaging starts 50 ms after
+arrival, when what lags the knob has settled: the tendon's viscous lag (the calibrated
+catheters' ``rate`` effect, tau = 25 ms: e^-2 of it is left) and the device's causal 20 Hz
+current filter (16 ms of group delay, settled in about 50 ms)."""
+DEFAULT_MEAN = 0.3
+"""Default averaging window of each search step (s), feature ``mean``: the last 0.3 s of the
+dwell. The twin's current noise (3 mA rms at 1 kHz before the filter) averages down to about
+0.17 mA, against 1.5 to 2.5 mA of change per 0.5 deg step once a tendon is taut; with 0.1 s the
+worst edge error over 10 seeds x 4 shapes x 2 knobs of the calibrated catheters was 0.61 deg
+(a 'fall' edge, where the slope changes least), with 0.3 s 0.24 deg (bench/bench_live.py)."""
+
+
 class DeviceProbe:
     """One knob of a live device as Algorithm 1's probe: ``position``, ``step_to``, ``stop``.
+
+    Each step is a step-and-dwell when the device offers it (protocol features ``dwell`` and
+    ``mean``): the knob moves to the target, holds there ``dwell`` seconds, and the reading is
+    the mean knob angle and motor current over the last ``mean`` seconds of the hold. One
+    instantaneous current sample carries the device's whole noise (a few mA, against a change
+    of about 2 mA per 0.5 deg step once a tendon is taut), and a reading taken while moving
+    carries the lags of the tendon and of the filter (the edge reads late in the direction of
+    motion); the settled mean has neither. A device without these features gives the single
+    sample of its ``POS`` reply (:attr:`averaged` is then False).
 
     Parameters
     ----------
@@ -618,6 +751,10 @@ class DeviceProbe:
         :class:`~hystcli.errors.SafetyStop` raised. None disables the check (not advised).
     speed : float, optional
         Knob speed for each step (deg/s); the device's default when None.
+    dwell : float or None
+        Hold at each target before the reply (s); None or 0: no hold.
+    mean : float or None
+        Averaging window (s) ending at the reply; None: the instantaneous sample.
     sample_factory : callable, optional
         Builds the returned sample from ``(q, current, tip)``; defaults to
         ``hystcli.shift.ProbeSample`` when that module exists, else :class:`ProbeReading`.
@@ -630,10 +767,13 @@ class DeviceProbe:
         Steps taken.
     travel : float
         Total knob travel commanded (deg).
+    averaged : bool
+        Whether the steps read a mean current (the device offers the features asked for).
     """
 
     def __init__(self, device: Device, knob: int, *, current_ceiling: float | None = None,
-                 speed: float | None = None, sample_factory: Any = None) -> None:
+                 speed: float | None = None, dwell: float | None = DEFAULT_DWELL,
+                 mean: float | None = DEFAULT_MEAN, sample_factory: Any = None) -> None:
         if device.info is not None and int(knob) not in device.info.knobs:
             raise DeviceError(f"device {device.info.name} has no knob {knob} "
                               f"(knobs: {','.join(map(str, device.info.knobs))})")
@@ -641,6 +781,11 @@ class DeviceProbe:
         self.knob = int(knob)
         self.current_ceiling = current_ceiling
         self.speed = speed
+        # ask only for what the device announced: a base-protocol device still works, with
+        # single-sample readings
+        self.dwell = dwell if dwell and device.supports("dwell") else None
+        self.mean = mean if mean and device.supports("mean") else None
+        self.averaged = self.mean is not None
         if sample_factory is None:
             try:
                 from .shift import ProbeSample as sample_factory  # type: ignore[no-redef]
@@ -662,6 +807,9 @@ class DeviceProbe:
     def step_to(self, q: float) -> Any:
         """Move the knob to ``q`` and return a sample ``(q, current, tip)``.
 
+        With averaging, ``q`` and ``current`` are the means over the averaging window (the
+        current is attributed to where it was measured).
+
         Raises
         ------
         SafetyStop
@@ -672,10 +820,12 @@ class DeviceProbe:
         q = float(q)
         self.travel += abs(q - self._q)
         self.steps += 1
-        s = self.device.move(self.knob, q, self.speed)
+        s = self.device.move(self.knob, q, self.speed, dwell=self.dwell, mean=self.mean)
         self._q = s.angle
         self.last = s
         self._check(s)
+        if s.averaged:
+            return self._make(s.mean_angle, s.mean_current, s.tip)
         return self._make(s.angle, s.current, s.tip)
 
     def stop(self) -> bool:
@@ -697,19 +847,27 @@ class DeviceProbe:
             return False
 
     def _check(self, s: Sample) -> None:
-        if self.current_ceiling is not None and abs(s.current) >= self.current_ceiling:
+        if self.current_ceiling is None:
+            return
+        worst = max(abs(s.current), abs(s.mean_current) if s.averaged else 0.0)
+        if worst >= self.current_ceiling:
             self.device.stop()
-            raise SafetyStop(f"knob {self.knob}: motor current {s.current:.1f} mA reached the "
+            raise SafetyStop(f"knob {self.knob}: motor current {worst:.1f} mA reached the "
                              f"ceiling {self.current_ceiling:g} mA at {s.angle:.2f} deg "
                              "(contact?); motors stopped")
 
 
 def open_probe(port: Any, baud: int = 115200, knob: int = 1, *, timeout: float = 1.0,
-               current_ceiling: float | None = None, speed: float | None = None) -> DeviceProbe:
-    """Open a device and make a probe of one knob (close it with ``probe.device.close()``)."""
+               current_ceiling: float | None = None, speed: float | None = None,
+               dwell: float | None = DEFAULT_DWELL, mean: float | None = DEFAULT_MEAN) -> DeviceProbe:
+    """Open a device and make a probe of one knob (close it with ``probe.device.close()``).
+
+    ``dwell`` and ``mean`` as in :class:`DeviceProbe` (used when the device offers them).
+    """
     device = Device(port, baud, timeout)
     try:
-        return DeviceProbe(device, knob, current_ceiling=current_ceiling, speed=speed)
+        return DeviceProbe(device, knob, current_ceiling=current_ceiling, speed=speed,
+                           dwell=dwell, mean=mean)
     except BaseException:
         device.stop()
         device.close()

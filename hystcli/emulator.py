@@ -9,7 +9,11 @@ client opens like a USB serial port.
 
 The twin is anything with the interface of ``hystcli.twin.LiveTwin``: ``move(knob, q_target,
 speed_deg_s=...) -> (knob_angle, motor_current, tip_angle)``, ``state(knob)`` (same triple),
-``tip_available`` and the catheter it simulates. POSIX only (pseudo-terminals).
+``tip_available`` and the catheter it simulates; the optional features need ``move(..., dt=...)``
+and ``hold(duration, dt=...)`` too. Besides the base protocol the emulator serves the optional
+features ``dwell`` and ``mean`` (a MOVE that holds the target before answering and reports the
+mean current over its last samples), so the live probe of Algorithm 1 reads a current averaged
+like the replay probe's. POSIX only (pseudo-terminals).
 """
 from __future__ import annotations
 
@@ -23,7 +27,9 @@ import time
 from dataclasses import dataclass
 from typing import Any, Iterable, Sequence
 
-from .device import (MAX_FRAME, NO_SEQ, PROTOCOL_VERSION, DeviceInfo, Frame,
+import numpy as np
+
+from .device import (FEATURES, MAX_DWELL, MAX_FRAME, NO_SEQ, PROTOCOL_VERSION, DeviceInfo, Frame,
                      FrameError, decode_frame, encode_frame, parse_knob, parse_number)
 from .errors import DataError
 
@@ -107,6 +113,15 @@ class DeviceEmulator:
         Knob speed (deg/s) when a MOVE gives none.
     faults : iterable of Fault
         Faults to inject.
+    features : sequence of str
+        Optional protocol features to announce and serve (default: all of
+        ``hystcli.device.FEATURES``: ``dwell`` and ``mean``); ``()`` makes a device of the base
+        protocol, which refuses MOVE options with ``E_ARG``.
+    mean_every : int
+        The ``mean`` of a MOVE takes every ``mean_every``-th sample of the hold (every sample
+        of the motion). The twin reports one sample per call, so this sets the emulator's cost;
+        the current is low-passed at 20 Hz (correlated over tens of ms), so 5 ms between
+        averaged samples loses next to nothing against averaging all of them.
 
     Attributes
     ----------
@@ -116,13 +131,21 @@ class DeviceEmulator:
     """
 
     def __init__(self, twin: Any, *, name: str = "hyst-sim", travel_limit: float = 170.0,
-                 default_speed: float = 20.0, faults: Iterable[Fault] = ()) -> None:
+                 default_speed: float = 20.0, faults: Iterable[Fault] = (),
+                 features: Sequence[str] = FEATURES, mean_every: int = 5) -> None:
         self.twin = twin
         catheter = getattr(twin, "catheter", None)
         knobs = tuple(int(k) for k in getattr(twin, "knobs", (1, 2)))
+        unknown = [f for f in features if f not in FEATURES]
+        if unknown:
+            raise DataError(f"unknown protocol feature {unknown[0]!r} (known: {', '.join(FEATURES)})")
+        if int(mean_every) < 1:
+            raise DataError(f"mean_every must be >= 1, got {mean_every}")
+        self.mean_every = int(mean_every)
         self.info = DeviceInfo(PROTOCOL_VERSION, name,
                                str(getattr(catheter, "name", catheter or "unknown")), knobs,
-                               bool(getattr(twin, "tip_available", True)), {"fw": "hystcli-emulator"})
+                               bool(getattr(twin, "tip_available", True)), {"fw": "hystcli-emulator"},
+                               tuple(f for f in FEATURES if f in features))
         self.travel_limit = float(travel_limit)
         self.default_speed = float(default_speed)
         self.faults: list[Fault] = list(faults)
@@ -132,6 +155,10 @@ class DeviceEmulator:
         self.errors_sent = 0
         self.silent = False
         self._lock = threading.Lock()
+
+    SAMPLE_DT = 0.001
+    """The twin's sample interval (s): ``LiveTwin.move``'s default, the controller's loop period.
+    A dwell or an averaging window is counted in these samples."""
 
     def inject(self, fault: Fault) -> None:
         """Add a fault (thread-safe)."""
@@ -204,14 +231,16 @@ class DeviceEmulator:
         if "error" in kinds:
             return [(self._err(frame.seq, kinds["error"].value or "E_MOTOR",
                                "injected fault: motor driver error"), 0.0)]
-        if len(frame.args) not in (2, 3):
-            return [(self._err(frame.seq, "E_ARG", "MOVE takes knob angle [speed]"), 0.0)]
+        positional = [a for a in frame.args if "=" not in a]
+        if len(positional) not in (2, 3) or frame.args[:len(positional)] != tuple(positional):
+            return [(self._err(frame.seq, "E_ARG", "MOVE takes knob angle [speed] [key=value ...]"), 0.0)]
         knob = self._knob(frame.args[0])
         if knob is None:
             return [(self._err(frame.seq, "E_KNOB", f"no knob {frame.args[0]}"), 0.0)]
         try:
             angle = parse_number(frame.args[1], "angle")
-            speed = parse_number(frame.args[2], "speed") if len(frame.args) == 3 else self.default_speed
+            speed = parse_number(frame.args[2], "speed") if len(positional) == 3 else self.default_speed
+            options = self._move_options(frame.args[len(positional):])
         except FrameError as exc:
             return [(self._err(frame.seq, "E_ARG", str(exc)), 0.0)]
         if abs(angle) > self.travel_limit:
@@ -219,14 +248,94 @@ class DeviceEmulator:
                                f"{angle:g} deg outside +-{self.travel_limit:g}"), 0.0)]
         if not speed > 0:
             return [(self._err(frame.seq, "E_ARG", "speed must be positive"), 0.0)]
-        q, c, y = self.twin.move(knob, angle, speed_deg_s=speed)
+        q, c, y, mean = self._run_move(knob, angle, speed, options.get("dwell", 0.0),
+                                       options.get("mean"))
         if "spike" in kinds:
-            c = float(c) + float(kinds["spike"].value or 5000.0)
-        reply = self._pos(frame.seq, knob, (q, c, y))
+            bump = float(kinds["spike"].value or 5000.0)
+            c = float(c) + bump
+            if mean is not None:
+                mean = (mean[0], mean[1] + bump, mean[2])
+        reply = self._pos(frame.seq, knob, (q, c, y), mean)
         if "garble" in kinds:
             reply = garble(reply)
         delay = float(kinds["delay"].value or 1.0) if "delay" in kinds else 0.0
         return [(reply, delay)]
+
+    def _move_options(self, fields: Sequence[str]) -> dict[str, float]:
+        """The ``key=value`` options of a MOVE (raises :class:`FrameError` on a bad one)."""
+        out: dict[str, float] = {}
+        for f in fields:
+            key, _, value = f.partition("=")
+            if key not in self.info.features:
+                raise FrameError(f"unknown MOVE option {key!r} (features: "
+                                 f"{','.join(self.info.features) or 'none'})")
+            if key in out:
+                raise FrameError(f"MOVE option {key} given twice")
+            v = parse_number(value, key)
+            if not (0.0 <= v <= MAX_DWELL) or (key == "mean" and v == 0.0):
+                raise FrameError(f"MOVE option {key}={value} outside "
+                                 f"{'(0' if key == 'mean' else '[0'}, {MAX_DWELL:g}] s")
+            out[key] = v
+        return out
+
+    def _run_move(self, knob: int, angle: float, speed: float, dwell: float,
+                  mean: float | None) -> tuple[float, float, float, tuple[float, float, float] | None]:
+        """Move the twin, hold it ``dwell`` s and, when asked, average the last ``mean`` s.
+
+        Returns ``(q, c, tip, (q_mean, c_mean, t_mean) or None)``. The twin advances in whole
+        samples of :attr:`SAMPLE_DT`; the samples inside the averaging window are stepped one by
+        one (every sample of the motion, every :attr:`mean_every`-th of the hold: the twin
+        reports only its last sample), those before the window in one batch each.
+        """
+        twin, dt = self.twin, self.SAMPLE_DT
+        n_dwell = int(round(dwell / dt)) if dwell > 0 else 0
+        if mean is None:
+            # a plain MOVE needs nothing of the twin but move() (its own sampling)
+            q, c, y = twin.move(knob, angle, speed_deg_s=speed)
+            if n_dwell:
+                twin.hold(n_dwell * dt, dt=dt)
+                q, c, y = twin.state(knob)
+            return q, c, y, None
+        q0 = float(twin.state(knob)[0])
+        # the twin's own sampling of a move: n samples, the last one on the target
+        n_move = max(1, int(math.ceil(abs(angle - q0) / (speed * dt) - 1e-9)))
+        n_win = min(max(1, int(round(mean / dt))), n_move + n_dwell)
+        before = n_move + n_dwell - n_win        # samples before the window, in batches
+        qs: list[float] = []
+        cs: list[float] = []
+        ws: list[float] = []   # samples of the window each reading stands for (a time weight)
+
+        def take(st: Sequence[float], weight: int = 1) -> None:
+            qs.append(float(st[0]))
+            cs.append(float(st[1]))
+            ws.append(float(weight))
+
+        if before >= n_move:
+            twin.move(knob, angle, speed_deg_s=speed, dt=dt)
+            if before > n_move:
+                twin.hold((before - n_move) * dt, dt=dt)
+        else:
+            if before > 0:
+                # the twin samples a move at q0 + (target - q0) * j / n: stopping after `before`
+                # samples and going on one by one walks the very same sample points
+                twin.move(knob, q0 + (angle - q0) * before / n_move, speed_deg_s=speed, dt=dt)
+            for i in range(before + 1, n_move + 1):
+                take(twin.move(knob, angle if i == n_move else q0 + (angle - q0) * i / n_move,
+                               speed_deg_s=speed, dt=dt))
+        left = n_win - len(qs)                   # window samples of the hold
+        if left:
+            # the hold's window is [end - left*dt, end): read every mean_every-th sample of it,
+            # the last one included, each standing for mean_every samples
+            every = min(self.mean_every, left)
+            head = left - every * (left // every)
+            if head:
+                twin.hold(head * dt, dt=dt)
+            for _ in range(left // every):
+                twin.hold(every * dt, dt=dt)
+                take(twin.state(knob), every)
+        q, c, y = twin.state(knob)
+        return q, c, y, (float(np.average(qs, weights=ws)), float(np.average(cs, weights=ws)),
+                         n_win * dt)
 
     def _knob(self, text: str) -> int | None:
         try:
@@ -235,10 +344,14 @@ class DeviceEmulator:
             return None
         return k if k in self.info.knobs else None
 
-    def _pos(self, seq: int | None, knob: int, st: Sequence[Any]) -> bytes:
+    def _pos(self, seq: int | None, knob: int, st: Sequence[Any],
+             mean: tuple[float, float, float] | None = None) -> bytes:
         q, c, y = st
         tip = "-" if (y is None or not self.info.tracker or not math.isfinite(y)) else float(y)
-        return encode_frame(seq, "POS", knob, float(q), float(c), tip)
+        extra = []
+        if mean is not None:
+            extra = [f"qmean={mean[0]:.4f}", f"cmean={mean[1]:.4f}", f"tmean={mean[2]:.4f}"]
+        return encode_frame(seq, "POS", knob, float(q), float(c), tip, *extra)
 
     def _err(self, seq: int | None, code: str, message: str) -> bytes:
         self.errors_sent += 1

@@ -700,9 +700,28 @@ def _return_knob(probe: Any, start: float) -> tuple[bool, str]:
     return False, f"the knob could NOT be confirmed back at {start:g} deg"
 
 
+DEFAULT_MAX_TRAVEL = 25.0
+"""Travel limit (deg) of a search whose model does not record the range it was identified on."""
+
+
+def default_max_travel(model: Model, knob: int) -> float:
+    """The travel limit of a search when none is given (deg of knob).
+
+    The largest ``|q|`` of the identification sweep (``KnobIdentification.q_min``/``q_max``):
+    the knob has already been driven that far on this catheter, and a search from the middle
+    reaches every edge inside it (a dead zone of +-19 deg shifted by 27 deg lies within the
+    paper's +-40 deg sweep); :data:`DEFAULT_MAX_TRAVEL` when the model has no identification.
+    """
+    ident = model.identification.get(int(knob)) if model.identification else None
+    if ident is None:
+        return DEFAULT_MAX_TRAVEL
+    reach = max(abs(float(ident.q_min)), abs(float(ident.q_max)))
+    return reach if math.isfinite(reach) and reach > 0 else DEFAULT_MAX_TRAVEL
+
+
 def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | None = None,
                  eps_upper: float | None = None, current_dead_zone: float | None = None,
-                 step: float = 0.5, max_steps: int | None = None, max_travel: float = 25.0,
+                 step: float = 0.5, max_steps: int | None = None, max_travel: float | None = None,
                  window: int = 6, confirm_steps: int = 4, direction: int = 1,
                  level_margin: float | None = None, return_home: bool = True,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
@@ -726,8 +745,9 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         Unit step :math:`u` (deg).
     max_steps : int, optional
         Step limit; default ``ceil(max_travel / step)``.
-    max_travel : float
-        Travel limit of the search (deg of knob, every step counted, the return excluded).
+    max_travel : float, optional
+        Travel limit of the search (deg of knob, every step counted, the return excluded);
+        default :func:`default_max_travel` (the identification sweep's reach).
     window : int
         Steps in the least-squares slope window (reset at every reversal).
     confirm_steps : int
@@ -761,6 +781,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     k = int(knob)
     km = model.knob(k)
     th = resolve_thresholds(model, k, eps_lower, eps_upper, current_dead_zone)
+    if max_travel is None:
+        max_travel = default_max_travel(model, k)
     if not (math.isfinite(step) and step > 0):
         raise ShiftDetectionError(f"the unit step must be a positive number of degrees, got {step}")
     if not (math.isfinite(max_travel) and max_travel > 0):

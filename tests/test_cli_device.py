@@ -24,9 +24,10 @@ from hystcli.device import Device, play_trajectory
 from hystcli.emulator import Fault, serve
 from hystcli.io import Run, read_run, write_run
 from hystcli.model import Shape
-from hystcli.twin import LiveTwin, get_catheter, periodic, simulate
+from hystcli.calibration import calibrated_catheter
+from hystcli.twin import LiveTwin, periodic, simulate
 
-CAT = get_catheter("ice-a")
+CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot` and `hyst simulate` serve as ice-a
 SHAPE = "alpha=45,theta=0"
 runner = CliRunner()
 
@@ -71,16 +72,21 @@ def commands(tmp_path_factory) -> Path:
 # ------------------------------------------------------------------------------------------
 # sim-robot (subprocess) + play + evaluate
 # ------------------------------------------------------------------------------------------
-def test_play_against_sim_robot_matches_the_offline_twin(commands, tmp_path):
-    proc, path = _start_sim_robot("--catheter", "ice-a", "--shape", SHAPE, "--seed", "4",
-                                  "--latency-ms", "0.2")
+def _play_on_sim_robot(commands: Path, out: Path, *robot_args: str) -> Path:
+    """Play ``commands`` with `hyst play` on a fresh `hyst sim-robot --catheter ice-a --shape SHAPE`."""
+    proc, path = _start_sim_robot("--catheter", "ice-a", "--shape", SHAPE, *robot_args)
     try:
-        out = tmp_path / "run.csv"
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
                                   "--quiet"])
         assert res.exit_code == 0, res.output
     finally:
         assert _stop(proc) == 0  # SIGTERM ends it cleanly
+    return out
+
+
+def test_play_against_sim_robot_matches_the_offline_twin(commands, tmp_path):
+    out = _play_on_sim_robot(commands, tmp_path / "run.csv", "--seed", "4", "--latency-ms", "0.2",
+                             "--effect", "none")
     run = read_run(out)
     cmds = read_run(commands)
     # metadata: the trajectory's kept, the device's added
@@ -90,7 +96,7 @@ def test_play_against_sim_robot_matches_the_offline_twin(commands, tmp_path):
     np.testing.assert_allclose(run["q1"], cmds["q1"])
     np.testing.assert_allclose(run["r1"], cmds["r1"])
     # the tip measured through the link against the offline twin, noise-free, on the same
-    # commands: only the tracker's noise (0.3 deg rms, twin.CATHETERS ice-a) separates them
+    # commands: only the tracker's noise (0.3 deg rms, ice-a's sensors) separates them
     offline = simulate(CAT, cmds.t, {1: cmds["q1"]}, shape=Shape.parse(SHAPE), effects=(), noise=False)
     err = run["y1"] - offline["y1"]
     assert np.sqrt(np.mean(err ** 2)) < 2 * CAT.em_noise_deg
@@ -109,6 +115,30 @@ def test_play_against_sim_robot_matches_the_offline_twin(commands, tmp_path):
         rmse.append(json.loads(res.stdout)["runs"][0]["rmse"])
     # both are the tracker noise (0.3 deg rms raw live, less after the offline 20 Hz filter)
     assert abs(rmse[0] - rmse[1]) < 0.25 and rmse[0] < 2 * CAT.em_noise_deg
+
+
+def test_sim_robot_serves_the_catheter_hyst_simulate_runs(commands, tmp_path):
+    """`sim-robot --catheter ice-a` and `simulate --catheter ice-a`, both with the catheter's
+    default effects (no --effect), are one catheter: the tip played live on the robot is the
+    offline simulation of the same commands up to the tracker's noise, while the bare model
+    (`simulate --effect none`) is far off (ice-a's creep alone delays 26 % of every tip move
+    by 3.35 s, degrees of tip on this 0.5 Hz input)."""
+    live = read_run(_play_on_sim_robot(commands, tmp_path / "run.csv", "--seed", "5"))
+    offline = {}
+    for name, extra in (("default", []), ("none", ["--effect", "none"])):
+        sim = tmp_path / f"sim_{name}.csv"
+        res = runner.invoke(app, ["simulate", "--catheter", "ice-a", "--shape", SHAPE, "--commands",
+                                  str(commands), "--no-noise", "-o", str(sim), "--quiet", *extra])
+        assert res.exit_code == 0, res.output
+        offline[name] = read_run(sim)
+    rms = {name: float(np.sqrt(np.mean((live["y1"] - run["y1"]) ** 2))) for name, run in offline.items()}
+    assert rms["default"] < 2 * CAT.em_noise_deg, rms
+    assert rms["none"] > 10 * rms["default"], rms
+
+
+def test_sim_robot_refuses_an_unknown_catheter():
+    res = runner.invoke(app, ["sim-robot", "--catheter", "ice-z"])
+    assert res.exit_code == 1 and "unknown virtual catheter 'ice-z'" in res.output
 
 
 def test_play_fault_from_sim_robot_subprocess_writes_nothing(commands, tmp_path):

@@ -8,8 +8,8 @@ import serial
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from hystcli.device import (MAX_FRAME, Device, DeviceInfo, Frame, FrameError, crc8, decode_frame,
-                            encode_frame, parse_pos)
+from hystcli.device import (MAX_FRAME, Device, DeviceInfo, Frame, FrameError, Sample, crc8,
+                            decode_frame, encode_frame, parse_pos)
 from hystcli.emulator import DeviceEmulator
 from hystcli.errors import DeviceError, HystError, LinkError
 
@@ -82,6 +82,45 @@ def test_handshake_fields_round_trip():
     assert DeviceInfo.from_fields(tuple(info.to_fields())) == info
     with pytest.raises(FrameError, match="tracker"):
         DeviceInfo.from_fields(("1", "name=a", "catheter=b", "knobs=1"))
+
+
+def test_handshake_features_are_optional():
+    # a base-protocol device sends no features=; one with the optional features lists them
+    base = DeviceInfo.from_fields(("1", "name=a", "catheter=b", "knobs=1,2", "tracker=1"))
+    assert base.features == () and not base.has("mean")
+    info = DeviceInfo(1, "rig7", "ice-b", (1, 2), True, {"fw": "2.1"}, ("dwell", "mean"))
+    fields = info.to_fields()
+    assert "features=dwell,mean" in fields
+    back = DeviceInfo.from_fields(tuple(fields))
+    assert back == info and back.has("dwell") and dict(back.extra) == {"fw": "2.1"}
+    # a feature this host does not know yet is kept, not an error
+    assert DeviceInfo.from_fields(tuple(fields[:-2]) + ("features=mean,warp9",)).features == ("mean", "warp9")
+    # a device's own key of that name that is not a feature list stays an unknown key
+    odd = DeviceInfo.from_fields(("1", "name=a", "catheter=b", "knobs=1", "tracker=0", "features=LED_Blue"))
+    assert odd.features == () and dict(odd.extra) == {"features": "LED_Blue"}
+
+
+def test_pos_with_the_mean_fields():
+    s = parse_pos(("1", "18.5000", "121.8000", "-", "qmean=18.4000", "cmean=121.2500", "tmean=0.3000"))
+    assert (s.angle, s.current, s.tip) == (18.5, 121.8, None)
+    assert (s.mean_angle, s.mean_current, s.mean_time, s.averaged) == (18.4, 121.25, 0.3, True)
+    plain = parse_pos(("2", "1.0000", "120.0000", "0.5000"))
+    assert not plain.averaged and plain.mean_angle is None
+    # a field this host does not know is ignored (a later optional feature)
+    assert parse_pos(("1", "1.0", "2.0", "3.0", "torque=9")) == Sample(1, 1.0, 2.0, 3.0)
+
+
+@pytest.mark.parametrize("args, words", [
+    (("1", "1.0", "2.0", "-", "cmean=3.0"), "only one of qmean"),
+    (("1", "1.0", "2.0", "-", "qmean=1.0", "cmean=3.0", "cmean=3.0"), "repeats"),
+    (("1", "1.0", "2.0", "-", "5.0"), "not key=value"),
+    (("1", "1.0", "2.0", "qmean=1.0", "cmean=3.0"), "positional"),
+    (("1", "1.0", "2.0", "-", "qmean=1.0", "cmean=nan"), "mean motor current"),
+    (("1", "1.0", "2.0", "-", "qmean=1.0", "cmean=3.0", "tmean=-1"), "negative"),
+])
+def test_pos_refuses_bad_mean_fields(args, words):
+    with pytest.raises(FrameError, match=words):
+        parse_pos(args)
 
 
 # ------------------------------------------------------------------------------------------
@@ -189,6 +228,49 @@ def test_host_reads_a_good_reply_from_a_scripted_port():
     dev = Device(_ScriptedPort(body + b"*%02X\n" % crc8(body)), timeout=0.1, handshake=False)
     s = dev.move(1, 2.0)
     assert (s.angle, s.current, s.tip) == (2.0, 150.0, 1.5)
+
+
+class _RecordingPort(_ScriptedPort):
+    def __init__(self, answer: bytes):
+        super().__init__(answer)
+        self.sent: list[bytes] = []
+
+    def write(self, data):
+        self.sent.append(data)
+        return super().write(data)
+
+
+def _featured(port) -> Device:
+    """A driver whose handshake (not sent) announced the features dwell and mean."""
+    dev = Device(port, timeout=0.1, handshake=False)
+    dev.info = DeviceInfo(1, "rig", "c", (1, 2), True, {}, ("dwell", "mean"))
+    return dev
+
+
+def test_host_sends_the_options_and_reads_the_mean():
+    body = b"1 POS 1 2.0000 150.0000 1.5000 qmean=2.0000 cmean=149.2500 tmean=0.3000"
+    port = _RecordingPort(body + b"*%02X\n" % crc8(body))
+    s = _featured(port).move(1, 2.0, 5.0, dwell=0.35, mean=0.3)
+    assert port.sent[-1] == encode_frame(1, "MOVE", 1, 2.0, 5.0, "dwell=0.3500", "mean=0.3000")
+    assert (s.mean_angle, s.mean_current, s.mean_time) == (2.0, 149.25, 0.3)
+
+
+def test_host_refuses_a_reply_without_the_mean_it_asked_for():
+    body = b"1 POS 1 2.0000 150.0000 1.5000"
+    dev = _featured(_ScriptedPort(body + b"*%02X\n" % crc8(body)))
+    with pytest.raises(LinkError, match="carries none"):
+        dev.move(1, 2.0, mean=0.3)
+
+
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 65535), st.floats(-170, 170), st.floats(-5e3, 5e3), st.floats(-170, 170),
+       st.floats(0.001, 10.0))
+def test_pos_mean_round_trip(seq, q, c, qm, t):
+    # what the emulator sends (4 decimals) is what the host reads, to the 4th decimal
+    frame = encode_frame(seq, "POS", 1, q, c, "-", f"qmean={qm:.4f}", f"cmean={c:.4f}", f"tmean={t:.4f}")
+    s = parse_pos(decode_frame(frame).args)
+    assert abs(s.mean_angle - qm) <= 5e-5 and abs(s.mean_current - c) <= 5e-5
+    assert abs(s.mean_time - t) <= 5e-5 and abs(s.angle - q) <= 5e-5
 
 
 # ------------------------------------------------------------------------------------------

@@ -9,6 +9,7 @@ import os
 import time
 from dataclasses import replace
 
+import numpy as np
 import pytest
 import serial
 
@@ -60,6 +61,9 @@ def test_handshake_gives_identity(device):
     assert (info.protocol, info.name, info.catheter, info.knobs, info.tracker) == \
         (1, "hyst-sim", "ice-a", (1, 2), True)
     assert device.info.as_meta()["device_catheter"] == "ice-a"
+    # the optional features of protocol 1 (docs/protocol.md, "Optional features")
+    assert info.features == ("dwell", "mean") and device.supports("mean")
+    assert info.as_meta()["device_features"] == "dwell,mean"
 
 
 def test_move_state_stop_relay_the_twin(server, device):
@@ -224,3 +228,133 @@ def test_fault_specs_parse(text, fault):
 def test_bad_fault_specs_are_data_errors(text):
     with pytest.raises(DataError):
         Fault.parse(text)
+
+
+# ------------------------------------------------------------------------------------------
+# optional features: step-and-dwell with the mean current
+# ------------------------------------------------------------------------------------------
+@pytest.fixture
+def quiet_device():
+    """A noise-free twin (current filter on) behind a real pty."""
+    srv = serve(_twin(noise=False))
+    dev = Device(srv.path, timeout=0.5)
+    yield dev
+    dev.close()
+    srv.shutdown()
+
+
+def test_dwell_mean_is_the_settled_current_computed_by_hand(quiet_device):
+    # ice-a knob 1 (twin.CATHETERS): d_pos 9.1 deg, b_pos 6.2 deg; current model no_load 120 mA,
+    # coulomb 6 mA, k_load 4 mA/deg, mu 0.25 (twin.CurrentParams). At rest at 15 deg after a rise
+    # from 0 (the friction play saturated at +1 after b/2 = 3.1 deg): tension 4 * (15 - 9.1) =
+    # 23.6 mA, current 120 + 23.6 + 0.25 * 23.6 = 149.5 mA.
+    s = quiet_device.move(1, 15.0, 20.0, dwell=0.35, mean=0.3)
+    assert s.averaged and s.mean_time == pytest.approx(0.3)
+    assert s.mean_angle == pytest.approx(15.0, abs=1e-4)
+    assert s.mean_current == pytest.approx(149.5, abs=0.05)
+    # the plain reply to a move on to 16 deg is read while moving at 20 deg/s: the static
+    # current there (149.5 + 5 mA/deg x 1 deg = 154.5 mA), plus the 6 mA Coulomb term of a
+    # moving motor, minus the causal filter's lag on the 100 mA/s ramp (~16 ms: ~1.6 mA)
+    moving = quiet_device.move(1, 16.0, 20.0).current
+    assert 154.5 + 2.0 < moving < 154.5 + 6.0
+
+
+def test_mean_window_reaching_into_the_motion_says_where_it_was_measured(quiet_device):
+    # 0 -> 1 deg at 5 deg/s: 200 samples of 1 ms at q_i = i/200 (i = 1..200), no dwell.
+    # The whole move (window clipped to it): mean of i/200 = 201/400 = 0.5025 deg over 0.2 s;
+    # its last 0.1 s: mean of i/200 for i = 101..200 = 301/400 = 0.7525 deg.
+    s = quiet_device.move(1, 1.0, 5.0, mean=10.0)
+    assert (s.mean_angle, s.mean_time) == (pytest.approx(0.5025, abs=1e-4), pytest.approx(0.2))
+    assert s.angle == pytest.approx(1.0, abs=1e-4)
+    s = quiet_device.move(1, 2.0, 5.0, mean=0.1)
+    assert (s.mean_angle, s.mean_time) == (pytest.approx(1.7525, abs=1e-4), pytest.approx(0.1))
+    # 2 -> 3 deg then a 0.1 s dwell, a 0.2 s window: the last 100 samples of the motion
+    # (q_i = 2 + i/200, i = 101..200: mean 2.7525) and the 100 of the hold (3.0), weighted by
+    # time: (2.7525 + 3.0) / 2 = 2.87625 deg
+    s = quiet_device.move(1, 3.0, 5.0, dwell=0.1, mean=0.2)
+    assert (s.mean_angle, s.mean_time) == (pytest.approx(2.87625, abs=1e-4), pytest.approx(0.2))
+
+
+def test_mean_averages_the_current_noise_down(device):
+    # at rest inside the dead zone (2 deg; ice-a's edges are -8.7 and 9.1) the current is the
+    # no-load 120 mA plus noise: 3 mA rms raw at 1 kHz, ~0.6 mA after the 20 Hz filter; a mean
+    # over 0.3 s averages ~300 raw samples: ~3/sqrt(300) = 0.17 mA. Readings 0.35 s apart.
+    device.move(1, 2.0, 20.0, dwell=0.5)
+    single = [device.move(1, 2.0, dwell=0.35).current for _ in range(30)]
+    means = [device.move(1, 2.0, dwell=0.35, mean=0.3).mean_current for _ in range(30)]
+    assert abs(sum(means) / len(means) - 120.0) < 0.15
+    sd_single, sd_mean = (float(np.std(x)) for x in (single, means))
+    assert sd_single > 0.35 and sd_mean < 0.5 * sd_single, (sd_single, sd_mean)
+
+
+def test_probe_reads_the_mean_when_the_device_offers_it(device):
+    probe = DeviceProbe(device, 1, dwell=0.35, mean=0.3)
+    assert probe.averaged
+    s = probe.step_to(0.5)
+    assert s.q == pytest.approx(0.5, abs=1e-4)  # the window lies in the dwell: at the target
+    assert s.current == pytest.approx(probe.last.mean_current)
+
+
+def test_base_protocol_device_gets_no_options_and_the_probe_falls_back():
+    srv = PtyServer(DeviceEmulator(_twin(seed=2), features=())).start()
+    try:
+        with Device(srv.path, timeout=0.5) as dev:
+            assert dev.info.features == () and not dev.supports("mean")
+            with pytest.raises(DeviceError, match="does not offer the protocol feature 'mean'"):
+                dev.move(1, 1.0, mean=0.3)
+            assert srv.emulator.moves == 0  # refused on the host: nothing was sent
+            probe = DeviceProbe(dev, 1)
+            assert not probe.averaged
+            s = probe.step_to(0.5)
+            assert (s.q, s.current) == (probe.last.angle, probe.last.current)
+        # a host that sends an option anyway gets E_ARG, and nothing moves
+        port = serial.Serial(srv.path, timeout=0.5)
+        try:
+            port.write(encode_frame(9, "MOVE", 1, 3.0, "dwell=0.1000"))
+            assert decode_frame(port.readline()).args[0] == "E_ARG"
+            port.write(encode_frame(10, "STATE", 1))
+            assert float(decode_frame(port.readline()).args[1]) == pytest.approx(0.5)
+        finally:
+            port.close()
+    finally:
+        srv.shutdown()
+
+
+@pytest.mark.parametrize("fields", [
+    ("1", "3.0", "dwell=11"),            # over the 10 s limit
+    ("1", "3.0", "mean=0"),              # an empty window
+    ("1", "3.0", "dwell=-0.1"),
+    ("1", "3.0", "blink=1"),             # no such option
+    ("1", "3.0", "dwell=0.1", "dwell=0.2"),
+    ("1", "dwell=0.1", "3.0"),           # an option before a positional field
+    ("1", "3.0", "mean=abc"),
+])
+def test_bad_move_options_are_refused_and_nothing_moves(server, fields):
+    port = serial.Serial(server.path, timeout=0.5)
+    try:
+        port.write(encode_frame(3, "MOVE", *fields))
+        reply = decode_frame(port.readline())
+        assert (reply.seq, reply.verb, reply.args[0]) == (3, "ERR", "E_ARG")
+        port.write(encode_frame(4, "STATE", 1))
+        assert float(decode_frame(port.readline()).args[1]) == 0.0
+    finally:
+        port.close()
+
+
+def test_host_refuses_bad_option_values_before_sending(device, server):
+    for kw in ({"dwell": -1.0}, {"mean": 0.0}, {"mean": float("nan")}, {"dwell": 11.0}):
+        with pytest.raises(DeviceError, match="MOVE option"):
+            device.move(1, 1.0, **kw)
+    assert server.emulator.moves == 0
+
+
+def test_the_reply_deadline_grows_by_the_dwell(server):
+    # a real device answers a dwelling MOVE dwell seconds after arrival; the emulator answers at
+    # once, so a 0.5 s answer delay stands in for a 0.4 s dwell (+ 0.1 s of motion)
+    with Device(server.path, timeout=0.3) as dev:
+        _fault(server, "delay", value="0.5")
+        s = dev.move(1, 1.0, 5.0, dwell=0.4)  # deadline 0.3 + 0.4 s: in time
+        assert s.angle == pytest.approx(1.0, abs=1e-4) and dev.stale_replies == 0
+        _fault(server, "delay", value="0.5")
+        with pytest.raises(LinkError, match="no reply"):
+            dev.move(1, 2.0, 5.0)  # no dwell: the plain 0.3 s deadline

@@ -1,8 +1,8 @@
 """`hyst rotate-shift` against shifts detected live on the twin after the same body rotation
 (issue 4, Must-show 4).
 
-The shaft keeps one shape ('alpha=90,theta=45': both knob offsets non-zero, 9.55 deg each by
-paper eqs. 1-4 on ice-a). `hyst detect-shift --port` on `hyst sim-robot --rotation 0` gives the
+The shaft keeps one shape ('alpha=90,theta=45': both knob offsets non-zero, 19.41 deg each by
+paper eqs. 1-4 on the calibrated ice-a: 1.83 / 6.0 x 90 x cos 45). `hyst detect-shift --port` on `hyst sim-robot --rotation 0` gives the
 shifted model; `hyst rotate-shift --degrees D` turns it into a prediction for the body rotated by
 D, which must agree with `detect-shift` run on `hyst sim-robot --rotation D`. Neither side is the
 code under test's own reference: both are measured on the twin through the pty.

@@ -15,8 +15,8 @@ from hystcli import twin
 from hystcli.errors import DataError, LinkError, ShiftDetectionError
 from hystcli.io import Run
 from hystcli.model import Geometry, KnobIdentification, KnobModel, Model, Shape
-from hystcli.shift import (ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult, apply_shift,
-                           detect_shift, plot_shift, resolve_thresholds)
+from hystcli.shift import (DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
+                           apply_shift, default_max_travel, detect_shift, plot_shift, resolve_thresholds)
 
 # A catheter of the twin fixed here (DESIGN.md section 6's example knob and a second knob like
 # it), so these tests do not move when the shared virtual catheters are recalibrated.
@@ -253,6 +253,18 @@ def test_travel_and_step_limits_are_never_exceeded():
     with pytest.raises(ShiftDetectionError, match=r"within 7 steps.*step limit is 7"):
         detect_shift(LAW_MODEL, p, 1, max_steps=7)
     assert len(p.moves) == 7 + 1                      # seven steps, then the return
+
+
+def test_default_travel_limit_is_the_identification_sweeps_reach():
+    ident = KnobIdentification(0.5, 4.0, -35.0, 38.0, current_dead_zone=120.0)
+    assert default_max_travel(Model({1: STRAIGHT}, identification={1: ident}), 1) == 38.0
+    assert default_max_travel(Model({1: STRAIGHT}), 1) == DEFAULT_MAX_TRAVEL == 25.0
+    # a search with no edge inside stops at that reach: 38 / 0.5 = 76 steps
+    p = LawProbe(-60.0, 60.0)
+    model = Model({1: STRAIGHT}, identification={1: ident})
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within 76 steps / 38.0 deg"):
+        detect_shift(model, p, 1)
+    assert max(abs(m) for m in p.moves[:-1]) <= 38.0
 
 
 def test_a_fault_stops_and_returns_the_knob_and_says_so():

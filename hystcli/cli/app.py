@@ -12,7 +12,7 @@ import json
 import sys
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Any, Callable, Optional
+from typing import Annotated, Any, Callable, List, Optional
 
 import typer
 
@@ -88,6 +88,25 @@ ModelOpt = Annotated[Path, typer.Option("--model", "-m", help="Model JSON file (
 PlotOpt = Annotated[Optional[Path], typer.Option("--plot", help="Also draw a figure to this PNG file.")]
 PortOpt = Annotated[Optional[str], typer.Option("--port", help="Serial port of the robot (name or pyserial URL).")]
 BaudOpt = Annotated[int, typer.Option("--baud", help="Baud rate of the serial port.")]
+EffectOpt = Annotated[Optional[List[str]], typer.Option(
+    "--effect", help="Unmodelled effect NAME[:param=value,...] (repeatable; 'none' for none; "
+                     "default: the catheter's own).")]
+
+
+def effects_option(values: Optional[List[str]]) -> tuple | None:
+    """What an ``--effect`` option asks for: None (not given: the catheter's default effects),
+    ``()`` for ``--effect none``, else the parsed effects.
+
+    One rule for ``simulate`` and ``sim-robot``, so both given the same options run the same
+    catheter.
+    """
+    from ..effects import parse_effect
+
+    if not values:
+        return None
+    if [e.strip().lower() for e in values] == ["none"]:
+        return ()
+    return tuple(parse_effect(e) for e in values)
 
 
 def echo_json(data: Any) -> None:

@@ -9,19 +9,21 @@ from typing import Annotated, List, Optional
 import typer
 
 from .. import io
+from ..calibration import CALIBRATED_NAMES, calibrated_catheter
 from ..errors import DataError
 from ..model import Shape
-from .app import BaudOpt, OutOpt, QuietOpt, SeedOpt, command, info, stderr_is_tty
+from .app import BaudOpt, EffectOpt, OutOpt, QuietOpt, SeedOpt, command, effects_option, info, stderr_is_tty
 
 
 @command("sim-robot", epilog="Example: hyst sim-robot --catheter ice-a --shape 'alpha=90,theta=0' "
                              "--latency-ms 2   (then: hyst play cmds.csv --port /dev/pts/N -o run.csv)")
 def sim_robot_cmd(
-    catheter: Annotated[str, typer.Option(help="Virtual catheter (ice-a, ice-b).")] = "ice-a",
+    catheter: Annotated[str, typer.Option(
+        help=f"Virtual catheter ({', '.join(CALIBRATED_NAMES)}): the calibrated one `hyst simulate` "
+             "and the sample data use.")] = "ice-a",
     shape: Annotated[str, typer.Option(help="Shaft shape: 'straight' or 'alpha=90,theta=0;...' (deg).")] = "straight",
     rotation: Annotated[float, typer.Option(help="Bulk rotation of the catheter body (deg).")] = 0.0,
-    effect: Annotated[Optional[List[str]], typer.Option(
-        "--effect", help="Unmodelled effect NAME[:key=value,...] (repeatable).")] = None,
+    effect: EffectOpt = None,
     seed: SeedOpt = 0,
     latency_ms: Annotated[float, typer.Option(min=0.0, help="Answer latency per frame (ms).")] = 0.0,
     knobs: Annotated[str, typer.Option(help="Knobs the robot drives, e.g. '1,2' or '1'.")] = "1,2",
@@ -35,11 +37,13 @@ def sim_robot_cmd(
     """Serve the virtual catheter as a robot on a pseudo-terminal until Ctrl-C or SIGTERM.
 
     Prints the device path (one line on stdout) to pass as --port to `hyst play` or
-    `hyst detect-shift`. The device speaks the hyst line protocol (docs/protocol.md).
+    `hyst detect-shift`. The device speaks the hyst line protocol (docs/protocol.md) with the
+    optional features dwell and mean. The catheter and its effects are those of
+    `hyst simulate` given the same --catheter and --effect.
     """
-    from ..effects import parse_effect
+    from ..effects import format_effects
     from ..emulator import Fault, serve
-    from ..twin import LiveTwin, get_catheter
+    from ..twin import LiveTwin
 
     try:
         knob_list = tuple(int(k) for k in knobs.split(","))
@@ -49,8 +53,9 @@ def sim_robot_cmd(
         raise typer.BadParameter("knobs are 1 and/or 2", param_hint="--knobs")
     if not name or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
         raise typer.BadParameter("a printable name without spaces, '*' or '='", param_hint="--name")
-    twin = LiveTwin(get_catheter(catheter), shape=Shape.parse(shape), rotation=rotation,
-                    effects=tuple(parse_effect(e) for e in effect or ()), seed=seed, knobs=knob_list)
+    # the user-facing catheters are the calibrated ones: the same lookup as `hyst simulate`
+    twin = LiveTwin(calibrated_catheter(catheter), shape=Shape.parse(shape), rotation=rotation,
+                    effects=effects_option(effect), seed=seed, knobs=knob_list)
     faults = [Fault.parse(f) for f in fault or ()]
     server = serve(twin, latency=latency_ms / 1000.0, faults=faults, name=name,
                    travel_limit=travel_limit, background=False)
@@ -62,7 +67,8 @@ def sim_robot_cmd(
     try:
         sys.stdout.write(server.path + "\n")
         sys.stdout.flush()
-        info(f"serving {catheter} ({Shape.parse(shape)}, rotation {rotation:g} deg) on {server.path}; "
+        info(f"serving {catheter} ({Shape.parse(shape)}, rotation {rotation:g} deg, effects "
+             f"{format_effects(twin.effects)}) on {server.path}; "
              "Ctrl-C to stop", quiet)
         server.serve_forever()
         if server.closed:

@@ -109,13 +109,16 @@ def detect_shift_cmd(
     step: Annotated[float, typer.Option("--step", help="Unit step u, deg.")] = 0.5,
     max_steps: Annotated[Optional[int], typer.Option(
         "--max-steps", help="Step limit (default: max-travel / step).")] = None,
-    max_travel: Annotated[float, typer.Option("--max-travel", help="Knob travel limit of the search, deg.")] = 25.0,
+    max_travel: Annotated[Optional[float], typer.Option(
+        "--max-travel", help="Knob travel limit of the search, deg (default: the reach of the model's "
+                             "identification sweep, max |q|; 25 without one).")] = None,
     current_ceiling: Annotated[float, typer.Option(
         "--current-ceiling", help="Live: a motor current beyond +-this (mA) is a contact: stop, return "
                                   "the knob, exit 1.")] = 2000.0,
     speed: Annotated[float, typer.Option(
-        "--speed", help="Live: knob speed of each step, deg/s. Slow steps keep the lag of the "
-                        "device's causal 20 Hz current filter (about 16 ms) small against the step.")] = 5.0,
+        "--speed", help="Live: knob speed between steps, deg/s. A device with the dwell/mean features "
+                        "holds at each step and reports the mean current after the lag has settled "
+                        "(docs/protocol.md); without them, slow steps keep that lag small.")] = 5.0,
     plot: PlotOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -126,7 +129,7 @@ def detect_shift_cmd(
         raise typer.BadParameter("detect-shift prints table or json", param_hint="--format")
     for name, v in (("--step", step), ("--max-travel", max_travel), ("--current-ceiling", current_ceiling),
                     ("--speed", speed)):
-        if not (math.isfinite(v) and v > 0):
+        if v is not None and not (math.isfinite(v) and v > 0):
             raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
         raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")

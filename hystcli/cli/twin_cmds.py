@@ -2,17 +2,16 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, List, Optional
+from typing import Annotated, Optional
 
 import typer
 
 from .. import io
-from ..effects import parse_effect
 from ..errors import DataError
 from ..model import Shape
 from ..calibration import calibrated_catheter
 from ..twin import CATHETERS, MOTIONS, simulate_motion
-from .app import OutOpt, QuietOpt, SeedOpt, command, info
+from .app import EffectOpt, OutOpt, QuietOpt, SeedOpt, command, effects_option, info
 
 
 def _parse_knobs(text: str | None) -> tuple[int, ...] | None:
@@ -44,9 +43,7 @@ def simulate_cmd(
         help="Run CSV whose q<k> (and r<k>) to play, e.g. the output of `hyst compensate`.")] = None,
     controller: Annotated[Optional[str], typer.Option(
         help="Controller name to record (default: none, or the --commands file's controller).")] = None,
-    effect: Annotated[Optional[List[str]], typer.Option(
-        "--effect", help="Unmodelled effect NAME[:param=value,...] (repeatable; 'none' for none; "
-        "default: the catheter's own).")] = None,
+    effect: EffectOpt = None,
     knobs: Annotated[Optional[str], typer.Option(
         help="Knobs to drive: 1, 2 or 1,2 (default 1; 1,2 for nonperiodic; the --commands file's).")] = None,
     rotation: Annotated[float, typer.Option(help="Bulk rotation of the catheter body (deg).")] = 0.0,
@@ -64,12 +61,7 @@ def simulate_cmd(
     # the user-facing catheters are the calibrated ones, the same the sample data was recorded on
     cath = calibrated_catheter(catheter)
     shp = Shape.parse(shape)
-    effs = None
-    if effect:
-        if [e.strip().lower() for e in effect] == ["none"]:
-            effs = ()
-        else:
-            effs = tuple(parse_effect(e) for e in effect)
+    effs = effects_option(effect)
     knob_sel = _parse_knobs(knobs)
     inputs = [commands] if commands is not None else []
     io.check_not_input(output, inputs)
