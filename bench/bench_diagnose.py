@@ -50,9 +50,7 @@ def experiment_runs(cat: twin.VirtualCatheter, trials: int) -> tuple[Model, list
             for trial in range(1, trials + 1):
                 run = twin.simulate_motion(cat, sh, "periodic", commands=cmd, controller=controller,
                                            seed=7, trial=trial)
-                # Compensation-Only records the offset it used (0), not the shaft's shift: the
-                # prediction must take the physical shift from the shape (DESIGN.md section 6)
-                runs.append(run.with_meta(offset1=None) if controller == "comp" else run)
+                runs.append(run)
     return base, runs
 
 

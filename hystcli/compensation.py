@@ -25,9 +25,10 @@ class Compensation:
     Attributes
     ----------
     run : Run
-        The trajectory with ``q<k>`` added and metadata ``controller``, ``offset<k>`` set.
+        The trajectory with ``q<k>`` added and metadata ``controller``, ``offset<k>`` (the shift
+        in effect, DESIGN.md section 6) and, for Compensation-Only, ``shift_ignored: true``.
     offsets : dict of int to float
-        Offset used per knob (deg).
+        Offset the commands used per knob (deg): the shift in effect, or 0 with ``ignore_shift``.
     warnings : tuple of str
         Things the user should know (e.g. commands outside the identified range).
     """
@@ -74,10 +75,19 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     Returns
     -------
     Compensation
+
+    Notes
+    -----
+    The output's ``offset<k>`` is the shift in effect for the trajectory even when
+    ``ignore_shift`` leaves it out of the commands (then ``shift_ignored: true`` says so): a run
+    played from these commands is then predicted, evaluated and diagnosed with the shaft's shift,
+    which the tip undergoes whatever the controller assumed. (DESIGN.md section 6 calls
+    ``offset<k>`` "the shift in effect for this run, as detected" and also "the offsets compensate
+    used"; for Compensation-Only the two differ, and the first is what predictions need.)
     """
     knobs = knobs_of(model, trajectory, "r", "desired tip angle")
-    offsets = {k: 0.0 for k in knobs} if ignore_shift else {
-        k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
+    in_effect = {k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
+    offsets = {k: 0.0 for k in knobs} if ignore_shift else in_effect
     new_cols: dict[str, np.ndarray] = {}
     warnings: list[str] = []
     with_effects = None
@@ -109,7 +119,11 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     meta = dict(trajectory.meta)
     meta["controller"] = controller
     for k in knobs:
-        meta[f"offset{k}"] = repr(float(offsets[k]))
+        meta[f"offset{k}"] = repr(float(in_effect[k]))
+    if ignore_shift:
+        meta["shift_ignored"] = "true"
+    else:
+        meta.pop("shift_ignored", None)
     return Compensation(Run(cols, meta, trajectory.source), offsets, tuple(warnings))
 
 

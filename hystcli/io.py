@@ -31,7 +31,8 @@ MODEL_FORMAT = "hyst-model"
 MODEL_VERSION = 1
 
 KNOWN_COLUMNS = ("t", "q1", "q2", "y1", "y2", "c1", "c2", "r1", "r2")
-KNOWN_META = ("catheter", "controller", "shape", "motion", "trial", "rotation", "offset1", "offset2", "condition")
+KNOWN_META = ("catheter", "controller", "shape", "motion", "trial", "rotation", "offset1", "offset2", "condition",
+              "shift_ignored")
 
 
 # --------------------------------------------------------------------------------------------

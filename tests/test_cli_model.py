@@ -60,6 +60,10 @@ def test_ignore_shift_is_compensation_only(files):
     assert res.exit_code == 0, res.output
     cmd = read_run(files / "c.csv")
     assert cmd.meta["controller"] == "comp"
+    # the commands ignore the shift, but the run still records the shift in effect (the model's
+    # own offset 6.0 here: no shape, no offset in the trajectory), flagged as ignored, so a run
+    # played from them is predicted with the shaft's real shift
+    assert float(cmd.meta["offset1"]) == 6.0 and cmd.meta["shift_ignored"] == "true"
     shifted = read_run(files / "traj.csv")
     # the unshifted inverse differs from the shifted one by exactly the offset on knob 1
     k = KnobModel(**EXAMPLE)

@@ -285,3 +285,24 @@ def test_compensating_with_the_diagnosed_effect_tracks_the_twin_better(effect):
         run = twin.simulate_motion(CAT, shape, commands=cmd, effects=[effect], seed=3)
         errs.append(float(np.sqrt(np.mean((run["y1"] - r) ** 2))))
     assert errs[1] < 0.5 * errs[0]
+
+
+def test_a_compensation_only_run_is_predicted_with_the_shafts_shift():
+    # Compensation-Only commands ignore the shift, but the tip still undergoes it: the run must
+    # carry the shift in effect (offset1 = the geometry's, paper eqs. 1-4: 1.2/8 * 45 = 6.75 deg
+    # on ice-a) so that prediction and diagnosis see the bent shaft, not offset 0
+    cat = twin.get_catheter("ice-a")
+    model = Model(cat.knobs, cat.geometry)
+    shape = "alpha=45,theta=0"
+    t, r = twin.periodic()
+    traj = Run({"t": t, "r1": r}, {"shape": shape, "motion": "periodic"})
+    cmd = compensation.compensate(model, traj, ignore_shift=True).run
+    assert float(cmd.meta["offset1"]) == pytest.approx(6.75) and cmd.meta["shift_ignored"] == "true"
+    run = twin.simulate_motion(cat, Shape.parse(shape), commands=cmd, controller="comp", effects=(),
+                               noise=False)
+    predicted = E.predict(model, run)[1]
+    np.testing.assert_allclose(predicted, run["y1"], atol=1e-6)
+    # and the effect-free diagnosis finds nothing to add to it
+    runs = [run, twin.simulate_motion(cat, Shape.parse(shape), commands=cmd, controller="comp",
+                                      effects=(), seed=1)]
+    assert diagnose(model, runs, candidates=["friction", "deadzone"]).selected == ()
