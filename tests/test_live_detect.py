@@ -153,6 +153,24 @@ def test_detect_shift_live_matches_true_shift(model_path, tmp_path, shape, segme
     assert shifted.meta["shift_source"] == f"live:{path}"
 
 
+def test_shorter_hold_and_window_are_options_and_are_checked(model_path, tmp_path):
+    # a 0.2 s hold averaged over its last 0.15 s still settles the 25 ms tendon lag and the
+    # 16 ms filter delay; straight shaft: the true shift is 0 on both knobs
+    out = tmp_path / "short.json"
+    proc, path = start_sim_robot("--seed", "7")
+    try:
+        res = detect(model_path, path, out, "--dwell", "0.2", "--mean-window", "0.15")
+    finally:
+        stop(proc)
+    assert res.exit_code == 0, res.output
+    for k in (1, 2):
+        assert abs(load_model(out).knob(k).offset) <= 0.5
+    for bad in (("--dwell", "-1"), ("--mean-window", "11"), ("--dwell", "nan")):
+        res = detect(model_path, "/dev/null-no-port", tmp_path / "x.json", *bad)
+        assert res.exit_code == 2 and bad[0] in res.output, res.output
+    assert not (tmp_path / "x.json").exists()
+
+
 def test_detect_shift_live_returns_knobs_home(model_path, tmp_path):
     """After a successful search both knobs are back where they began (0 deg), read by a fresh
     connection to the same device."""

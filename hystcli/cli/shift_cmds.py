@@ -25,8 +25,8 @@ from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, P
 
 @contextlib.contextmanager
 def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
-            baud: int, current_ceiling: float | None = None,
-            speed: float | None = None) -> Iterator[tuple[dict[int, Any], Any]]:
+            baud: int, current_ceiling: float | None = None, speed: float | None = None,
+            dwell: float | None = None, mean: float | None = None) -> Iterator[tuple[dict[int, Any], Any]]:
     """Yield ``({knob: probe}, run or None)``; live probes are closed on the way out."""
     if replay is not None:
         run = read_run(replay)
@@ -50,7 +50,9 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
     with contextlib.ExitStack() as stack:
         probes = {}
         for k in knobs:
-            probe = device.open_probe(port, baud, k, current_ceiling=current_ceiling, speed=speed)
+            probe = device.open_probe(port, baud, k, current_ceiling=current_ceiling, speed=speed,
+                                      dwell=device.DEFAULT_DWELL if dwell is None else dwell,
+                                      mean=device.DEFAULT_MEAN if mean is None else mean)
             dev = getattr(probe, "device", None)
             if dev is not None and hasattr(dev, "close"):
                 stack.callback(dev.close)
@@ -119,6 +121,13 @@ def detect_shift_cmd(
         "--speed", help="Live: knob speed between steps, deg/s. A device with the dwell/mean features "
                         "holds at each step and reports the mean current after the lag has settled "
                         "(docs/protocol.md); without them, slow steps keep that lag small.")] = 5.0,
+    dwell: Annotated[Optional[float], typer.Option(
+        "--dwell", help="Live: hold at each step before reading, s (default 0.35; 0: no hold). Used "
+                        "when the device offers the dwell feature.")] = None,
+    mean_window: Annotated[Optional[float], typer.Option(
+        "--mean-window", help="Live: average the current over the last S seconds of the hold "
+                              "(default 0.3; 0: one sample; a window longer than the hold also "
+                              "averages the move). Used when the device offers the mean feature.")] = None,
     plot: PlotOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -131,6 +140,9 @@ def detect_shift_cmd(
                     ("--speed", speed)):
         if v is not None and not (math.isfinite(v) and v > 0):
             raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
+    for name, v in (("--dwell", dwell), ("--mean-window", mean_window)):
+        if v is not None and not (math.isfinite(v) and 0 <= v <= 10.0):  # device.MAX_DWELL
+            raise typer.BadParameter(f"must be between 0 and 10 s, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
         raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
     inputs = [model_path] + ([replay] if replay is not None else [])
@@ -150,7 +162,7 @@ def detect_shift_cmd(
     options = dict(eps_lower=eps_lower, eps_upper=eps_upper, current_dead_zone=current_dead_zone,
                    step=step, max_steps=max_steps, max_travel=max_travel)
     results: dict[int, shift_mod.ShiftResult] = {}
-    with _probes(model, knobs, replay, port, baud, current_ceiling, speed) as (probes, run):
+    with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window) as (probes, run):
         for k, probe in probes.items():
             progress = None
             if port is not None and not quiet:
