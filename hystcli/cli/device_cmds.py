@@ -80,6 +80,35 @@ def sim_robot_cmd(
         server.shutdown()
 
 
+@command("sweep", epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
+                         "--port /dev/ttyUSB0 -o sweep_knob1.csv && hyst identify sweep_knob1.csv -o model.json")
+def sweep_cmd(
+    output: OutOpt,
+    knob: Annotated[int, typer.Option("--knob", min=1, max=2, help="Knob to sweep.")] = 1,
+    amplitude: Annotated[float, typer.Option(
+        "--amplitude", min=1.0, max=180.0, help="Sweep amplitude +-A, deg (paper: 40).")] = 40.0,
+    peak_speed: Annotated[float, typer.Option(
+        "--peak-speed", min=0.1, max=1000.0, help="Peak knob speed, deg/s (paper: 40).")] = 40.0,
+    cycles: Annotated[float, typer.Option("--cycles", min=0.5, max=100.0, help="Sine cycles (paper: 2).")] = 2.0,
+    fs: Annotated[float, typer.Option("--fs", min=1.0, max=10000.0, help="Sample rate, Hz.")] = 1000.0,
+    quiet: QuietOpt = False,
+) -> None:
+    """Write the identification sweep (paper section II-C-2) as a command trajectory for `hyst play`.
+
+    A sine of +-AMPLITUDE deg on one knob with the given peak speed, the other knob at rest, on
+    a straight shaft: play it on the robot with `hyst play` and identify the model from the
+    recording with `hyst identify`.
+    """
+    from ..twin import sweep
+
+    t, q = sweep(amplitude=amplitude, cycles=cycles, peak_speed=peak_speed, fs=fs)
+    run = io.Run({"t": t, f"q{knob}": q}, {"motion": "sweep", "controller": "none", "knob": str(knob),
+                                            "shape": "straight"})
+    io.write_run(output, run)
+    info(f"wrote {output}: knob {knob}, +-{amplitude:g} deg, {cycles:g} cycles at up to "
+         f"{peak_speed:g} deg/s, {len(run)} samples ({t[-1]:.1f} s)", quiet)
+
+
 @command("play", epilog="Example: hyst play cmds.csv --port /dev/ttyUSB0 -o run.csv")
 def play_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Command trajectory CSV with t and q1/q2 "
