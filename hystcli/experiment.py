@@ -369,6 +369,9 @@ class ShiftRow:
     true_offset : float or None
         From the replay's ``true_offset<k>`` metadata (deg).
     result : ShiftResult
+    true_edge : float or None
+        Where the twin really has the edge the search found (deg): the true offset plus the
+        catheter's true ``d_pos`` or ``d_neg``.
     """
 
     catheter: str
@@ -377,17 +380,25 @@ class ShiftRow:
     shape: str
     true_offset: float | None
     result: ShiftResult
+    true_edge: float | None = None
 
     @property
     def error(self) -> float | None:
-        """Detected minus true offset (deg)."""
+        """Detected minus true offset (deg): the search's error plus the identification's error
+        in the edge it measures from (``offset = edge - D`` of the identified model)."""
         return None if self.true_offset is None else self.result.offset - self.true_offset
+
+    @property
+    def edge_error(self) -> float | None:
+        """Found minus true edge (deg): the search's own error, whatever the identified D."""
+        return None if self.true_edge is None else self.result.edge_found_at - self.true_edge
 
     def to_dict(self) -> dict:
         r = self.result
         return {"catheter": self.catheter, "scenario": self.scenario, "knob": self.knob,
                 "shape": self.shape, "offset": r.offset, "true_offset": self.true_offset,
                 "error": self.error, "edge": r.edge, "edge_found_at": r.edge_found_at,
+                "true_edge": self.true_edge, "edge_error": self.edge_error,
                 "transition": r.transition, "start_outside": r.start_outside,
                 "travel": r.travel, "steps": r.steps}
 
@@ -680,8 +691,10 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
                 res = detect_shift(model, ReplayProbe(replay, k), k, step=DETECT_STEP,
                                    max_travel=DETECT_MAX_TRAVEL)
                 true = replay.meta.get(f"true_offset{k}")
-                shifts.append(ShiftRow(cat.name, s.name, k, str(s.shape(k)),
-                                       None if true is None else float(true), res))
+                true = None if true is None else float(true)
+                d_true = cat.knobs[k].d_pos if res.edge == "pos" else cat.knobs[k].d_neg
+                shifts.append(ShiftRow(cat.name, s.name, k, str(s.shape(k)), true, res,
+                                       None if true is None else true + d_true))
                 offsets[k] = res.offset
                 tick(f"{cat.name} {s.name}: knob {k} shift {res.offset:+.2f} deg")
             ref = refs[s.motion]
@@ -869,42 +882,44 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
 
 def shift_table(result: ExperimentResult) -> metrics.Table:
     """Algorithm 1 per catheter, scenario and knob: detected and true offsets."""
-    cols = ("catheter", "scenario", "knob", "offset", "true_offset", "error", "edge", "travel")
-    heads = ("catheter", "scenario", "knob", "offset", "true offset", "error", "edge", "travel")
+    cols = ("catheter", "scenario", "knob", "offset", "true_offset", "error", "edge", "edge_found_at",
+            "true_edge", "edge_error", "travel")
+    heads = ("catheter", "scenario", "knob", "offset", "true offset", "error", "edge", "found at",
+             "true edge", "edge error", "travel")
     rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.true_offset, s.error,
-                  f"{s.result.edge} ({s.result.transition})", s.result.travel) for s in result.shifts)
-    return metrics.Table(cols, heads, rows, ("Algorithm 1 on the replays: offsets and knob travel in deg",))
+                  f"{s.result.edge} ({s.result.transition})", s.result.edge_found_at, s.true_edge,
+                  s.edge_error, s.result.travel) for s in result.shifts)
+    return metrics.Table(cols, heads, rows, (
+        "Algorithm 1 on the replays",
+        "deg; error = detected - true offset; edge error = found - true edge (the search's own error: "
+        "the offset also carries the identified model's error in D, offset = edge - D)"))
+
+
+def _section(table: metrics.Table, fmt: str) -> str:
+    """One titled table: ``notes[0]`` is the title, ``notes[1]`` the note under it, any further
+    notes a list below that."""
+    title, note, *items = table.notes
+    body = metrics.Table(table.columns, table.headers, table.rows)
+    if fmt == "markdown":
+        listed = "".join(f"- {line}\n" for line in items)
+        return f"**{title}**\n\n" + metrics.format_markdown(body) + f"\n{note}\n" + (f"\n{listed}" if items else "")
+    listed = "".join(f"  {line}\n" for line in items)
+    return f"{title}\n\n" + metrics.format_text(body) + f"\n{note}\n{listed}"
 
 
 def render(result: ExperimentResult, fmt: str = "table") -> str:
-    """Tables I and II beside the paper's values as text (``table``, ``markdown``) or ``json``."""
+    """Tables I and II beside the paper's values, the diagnosed controller beside the paper's
+    Compensation+Shift, and Algorithm 1's detections, as text (``table``, ``markdown``) or ``json``."""
     if fmt == "json":
         return result.to_json()
-    parts = []
-    for name in ("I", "II"):
-        tab = comparison_table(result, name)
-        if not tab.rows:
-            continue
-        title, note = tab.notes
-        body = metrics.Table(tab.columns, tab.headers, tab.rows)
-        if fmt == "markdown":
-            parts.append(f"**{title}**\n\n" + metrics.format_markdown(body) + f"\n{note}\n")
-        elif fmt == "table":
-            parts.append(f"{title}\n\n" + metrics.format_text(body) + f"\n{note}\n")
-        else:
-            raise DataError(f"unknown format {fmt!r}: choose among table, markdown, json")
+    if fmt not in ("table", "markdown"):
+        raise DataError(f"unknown format {fmt!r}: choose among table, markdown, json")
+    tables = [comparison_table(result, "I"), comparison_table(result, "II"), beyond_table(result),
+              shift_table(result)]
+    parts = [_section(t, fmt) for t in tables if t.rows]
     compared = result.compared()
-    within = compared - len(result.misses())
-    summary = f"{within}/{compared} paper values matched within {TOLERANCE:.0%}"
-    beyond = beyond_table(result)
-    if beyond.rows:
-        title, note, *found = beyond.notes
-        body = metrics.Table(beyond.columns, beyond.headers, beyond.rows)
-        found_text = "".join(f"- {line}\n" if fmt == "markdown" else f"  {line}\n" for line in found)
-        if fmt == "markdown":
-            parts.append(f"**{title}**\n\n" + metrics.format_markdown(body) + f"\n{note}\n\n{found_text}")
-        else:
-            parts.append(f"{title}\n\n" + metrics.format_text(body) + f"\n{note}\n{found_text}")
+    summary = f"{compared - len(result.misses())}/{compared} paper values matched within {TOLERANCE:.0%}"
+    if result.beyond():
         met = len(result.beyond()) - len(result.beyond_misses())
         summary += f"; beyond the paper: {met}/{len(result.beyond())} diagnosed RMSE at most half the paper's"
     parts.append(summary + "\n")

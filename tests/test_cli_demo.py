@@ -75,6 +75,8 @@ def test_demo_markdown_shows_paper_beside_ours(tmp_path):
     # the paper's Compensation+Shift at alpha=45 (Kim & Mansi Table I: RMSE (7.9, 1.3)), target 7.9 / 2
     row = next(ln for ln in text.splitlines() if ln.startswith("| alpha=45 | (7.9, 1.3) |"))
     assert "<= 3.95" in row
+    # Algorithm 1's detections, with the true edge beside the found one
+    assert "**Algorithm 1 on the replays**" in text and "| edge error |" in text
     assert "demo took" in res.stderr
 
 

@@ -101,6 +101,12 @@ def test_detected_shift_is_near_the_geometry_of_the_shape(small):
         assert row.true_offset == pytest.approx(expected, abs=1e-5)
         # the calibrated twin has unmodelled effects (rate lag biases the current's edges a little)
         assert abs(row.result.offset - expected) < 2.5, row.to_dict()
+        # the edge itself is found close to where the twin has it: the true offset plus ice-a's
+        # true d_pos / d_neg (calibration.py: knob 1 +-18.8, knob 2 +17.8 / -19.8); most of the
+        # offset's error is the identified D's (offset = edge - D of the identified model)
+        d_true = {(1, "pos"): 18.8, (1, "neg"): -18.8, (2, "pos"): 17.8, (2, "neg"): -19.8}
+        assert row.true_edge == pytest.approx(expected + d_true[(row.knob, row.result.edge)], abs=1e-5)
+        assert abs(row.edge_error) < 0.75, row.to_dict()
         assert row.result.travel <= ex.DETECT_MAX_TRAVEL
 
 
