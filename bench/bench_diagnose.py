@@ -2,8 +2,8 @@
 
 The data are the size of the demo's experiment: 2 catheters x 3 shapes (straight, alpha=45,
 alpha=90) x 3 controllers (none, comp, comp+shift) x 3 trials of the paper's periodic run (60 deg,
-0.04 Hz, 50 s at 100 Hz), made by the twin with each catheter's default effects (the calibrated
-ones of hystcli.calibration when present). Diagnose refuses mixed catheters, so each catheter's
+0.04 Hz, 50 s at 100 Hz), made by the twin with each calibrated catheter's default effects
+(hystcli.calibration). Diagnose refuses mixed catheters, so each catheter's
 27 runs are one diagnosis with leave-one-run-out (27 folds), against the catheter's true
 straight-shaft model; the figure is the sum of both (one process, one core), data generation
 excluded.
@@ -16,25 +16,12 @@ import argparse
 import time
 
 from hystcli import compensation, twin
+from hystcli.calibration import calibrated_catheter
 from hystcli.diagnose import diagnose
 from hystcli.io import Run
 from hystcli.model import Model, Shape
 
 SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=0")
-
-
-def catheter(name: str) -> twin.VirtualCatheter:
-    try:
-        from hystcli.calibration import calibrated_catheter
-    except ImportError:  # before the calibration lands: the twin's catheter with two effects
-        from dataclasses import replace
-
-        from hystcli.effects import make_effect
-
-        cat = twin.get_catheter(name)
-        return replace(cat, default_effects=(make_effect("latency", delay=0.1).spec(),
-                                             make_effect("friction", mu=0.2).spec()))
-    return calibrated_catheter(name)
 
 
 def experiment_runs(cat: twin.VirtualCatheter, trials: int) -> tuple[Model, list[Run]]:
@@ -62,7 +49,7 @@ def main() -> None:
     total = 0.0
     n_runs = n_samples = 0
     for name in ("ice-a", "ice-b"):
-        cat = catheter(name)
+        cat = calibrated_catheter(name)
         base, runs = experiment_runs(cat, args.trials)
         n_runs += len(runs)
         n_samples += sum(len(r) for r in runs)

@@ -31,6 +31,7 @@ from typing import Any, Callable, Mapping
 import numpy as np
 
 from .errors import DeviceError, LinkError, SafetyStop
+from .shift import ProbeSample
 
 PROTOCOL_VERSION = 1
 FEATURES = ("dwell", "mean")
@@ -708,15 +709,6 @@ class Device:
 # --------------------------------------------------------------------------------------------
 # the live probe of Algorithm 1
 # --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class ProbeReading:
-    """What one live step measured (shaped like ``hystcli.shift.ProbeSample``)."""
-
-    q: float
-    current: float
-    tip: float | None
-
-
 DEFAULT_DWELL = 0.35
 """Default hold at each search step (s), feature ``dwell``. The averaging starts 50 ms after
 arrival, when what lags the knob has settled: the tendon's viscous lag (the calibrated
@@ -755,9 +747,6 @@ class DeviceProbe:
         Hold at each target before the reply (s); None or 0: no hold.
     mean : float or None
         Averaging window (s) ending at the reply; None: the instantaneous sample.
-    sample_factory : callable, optional
-        Builds the returned sample from ``(q, current, tip)``; defaults to
-        ``hystcli.shift.ProbeSample`` when that module exists, else :class:`ProbeReading`.
 
     Attributes
     ----------
@@ -773,7 +762,7 @@ class DeviceProbe:
 
     def __init__(self, device: Device, knob: int, *, current_ceiling: float | None = None,
                  speed: float | None = None, dwell: float | None = DEFAULT_DWELL,
-                 mean: float | None = DEFAULT_MEAN, sample_factory: Any = None) -> None:
+                 mean: float | None = DEFAULT_MEAN) -> None:
         if device.info is not None and int(knob) not in device.info.knobs:
             raise DeviceError(f"device {device.info.name} has no knob {knob} "
                               f"(knobs: {','.join(map(str, device.info.knobs))})")
@@ -786,12 +775,6 @@ class DeviceProbe:
         self.dwell = dwell if dwell and device.supports("dwell") else None
         self.mean = mean if mean and device.supports("mean") else None
         self.averaged = self.mean is not None
-        if sample_factory is None:
-            try:
-                from .shift import ProbeSample as sample_factory  # type: ignore[no-redef]
-            except ImportError:
-                sample_factory = ProbeReading
-        self._make = sample_factory
         first = device.state(self.knob)
         self._check(first)
         self._q = first.angle
@@ -825,8 +808,8 @@ class DeviceProbe:
         self.last = s
         self._check(s)
         if s.averaged:
-            return self._make(s.mean_angle, s.mean_current, s.tip)
-        return self._make(s.angle, s.current, s.tip)
+            return ProbeSample(s.mean_angle, s.mean_current, s.tip)
+        return ProbeSample(s.angle, s.current, s.tip)
 
     def stop(self) -> bool:
         """Stop every motor (never raises)."""

@@ -8,15 +8,15 @@ replay, or ``hystcli.device.open_probe`` on the serial port), calls
 from __future__ import annotations
 
 import contextlib
-import importlib.util
 import math
 from pathlib import Path
 from typing import Annotated, Any, Iterator, Optional
 
 import typer
 
+from .. import device
 from .. import shift as shift_mod
-from ..errors import DataError, HystError
+from ..errors import DataError
 from ..io import check_not_input, file_sha256, load_model, read_run, save_model
 from ..model import Model
 from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
@@ -26,7 +26,8 @@ from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, P
 @contextlib.contextmanager
 def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
             baud: int, current_ceiling: float | None = None, speed: float | None = None,
-            dwell: float | None = None, mean: float | None = None) -> Iterator[tuple[dict[int, Any], Any]]:
+            dwell: float = device.DEFAULT_DWELL,
+            mean: float = device.DEFAULT_MEAN) -> Iterator[tuple[dict[int, Any], Any]]:
     """Yield ``({knob: probe}, run or None)``; live probes are closed on the way out."""
     if replay is not None:
         run = read_run(replay)
@@ -39,11 +40,6 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
             model.knob(k)
         yield {k: shift_mod.ReplayProbe(run, k) for k in knobs}, run
         return
-    if importlib.util.find_spec("hystcli.device") is None:
-        raise HystError("live detection needs the device driver (hystcli.device), which this "
-                        "install does not have; use --replay RUN.csv")
-    from .. import device
-
     knobs = list(model.knobs) if knobs is None else knobs
     for k in knobs:
         model.knob(k)
@@ -51,11 +47,8 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
         probes = {}
         for k in knobs:
             probe = device.open_probe(port, baud, k, current_ceiling=current_ceiling, speed=speed,
-                                      dwell=device.DEFAULT_DWELL if dwell is None else dwell,
-                                      mean=device.DEFAULT_MEAN if mean is None else mean)
-            dev = getattr(probe, "device", None)
-            if dev is not None and hasattr(dev, "close"):
-                stack.callback(dev.close)
+                                      dwell=dwell, mean=mean)
+            stack.callback(probe.device.close)
             probes[k] = probe
         yield probes, None
 
@@ -121,13 +114,13 @@ def detect_shift_cmd(
         "--speed", help="Live: knob speed between steps, deg/s. A device with the dwell/mean features "
                         "holds at each step and reports the mean current after the lag has settled "
                         "(docs/protocol.md); without them, slow steps keep that lag small.")] = 5.0,
-    dwell: Annotated[Optional[float], typer.Option(
-        "--dwell", help="Live: hold at each step before reading, s (default 0.35; 0: no hold). Used "
-                        "when the device offers the dwell feature.")] = None,
-    mean_window: Annotated[Optional[float], typer.Option(
+    dwell: Annotated[float, typer.Option(
+        "--dwell", help="Live: hold at each step before reading, s (0: no hold). Used when the "
+                        "device offers the dwell feature.")] = device.DEFAULT_DWELL,
+    mean_window: Annotated[float, typer.Option(
         "--mean-window", help="Live: average the current over the last S seconds of the hold "
-                              "(default 0.3; 0: one sample; a window longer than the hold also "
-                              "averages the move). Used when the device offers the mean feature.")] = None,
+                              "(0: one sample; a window longer than the hold also averages the "
+                              "move). Used when the device offers the mean feature.")] = device.DEFAULT_MEAN,
     plot: PlotOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -141,8 +134,8 @@ def detect_shift_cmd(
         if v is not None and not (math.isfinite(v) and v > 0):
             raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
     for name, v in (("--dwell", dwell), ("--mean-window", mean_window)):
-        if v is not None and not (math.isfinite(v) and 0 <= v <= 10.0):  # device.MAX_DWELL
-            raise typer.BadParameter(f"must be between 0 and 10 s, got {v}", param_hint=name)
+        if not (math.isfinite(v) and 0 <= v <= device.MAX_DWELL):
+            raise typer.BadParameter(f"must be between 0 and {device.MAX_DWELL:g} s, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
         raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
     inputs = [model_path] + ([replay] if replay is not None else [])
