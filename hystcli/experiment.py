@@ -104,6 +104,10 @@ PAPER_TABLE_II: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]] = Ma
 })
 """The paper's Table II (source: Kim & Mansi, Table II), keyed by (controller, scenario)."""
 
+PAPER_CELLS: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]] = MappingProxyType(
+    {**PAPER_TABLE_I, **PAPER_TABLE_II})
+"""Every cell of the paper's Tables I and II, keyed by (controller, scenario)."""
+
 # Kim & Mansi, Tables I and II, row "Improvement rate (%)" of Compensation+Shift, given in the
 # paper as "<against No Compensation> and <against Compensation-Only>".
 PAPER_IMPROVEMENT: Mapping[str, Mapping[str, tuple[float, float]]] = MappingProxyType({
@@ -192,6 +196,16 @@ class Scenario:
     def knobs_together(self) -> bool:
         """Both knobs in one run (2-DoF) rather than one knob per run."""
         return self.table == "II"
+
+    @property
+    def knob_groups(self) -> list[tuple[int, ...]]:
+        """The knobs of each run: both in one run (2-DoF), else one run per knob."""
+        return [tuple(KNOBS)] if self.knobs_together else [(k,) for k in KNOBS]
+
+    @property
+    def bent(self) -> bool:
+        """Whether the shaft is bent (there is a shift: Compensation+Shift runs)."""
+        return self.name != "straight"
 
 
 SCENARIOS: tuple[Scenario, ...] = (
@@ -488,7 +502,7 @@ class ExperimentResult:
         for c in self.cells:
             if c.controller != DIAGNOSED:
                 continue
-            paper = {**PAPER_TABLE_I, **PAPER_TABLE_II}.get(("comp+shift", c.scenario))
+            paper = PAPER_CELLS.get(("comp+shift", c.scenario))
             if paper is not None:
                 out.append((c.scenario, c, BEYOND_FACTOR * paper["rmse"][0]))
         return out
@@ -640,16 +654,9 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     source = _Source(None if data_dir is None else Path(data_dir), int(seed))
 
     def runs_per_catheter() -> int:
-        n = 0
-        for s in wanted:
-            ctrls = len(CONTROLLERS) - (1 if s.name == "straight" else 0)
-            n += ctrls * (1 if s.knobs_together else len(KNOBS))
-        return n
+        return sum((len(CONTROLLERS) - (0 if s.bent else 1)) * len(s.knob_groups) for s in wanted)
 
-    def diag_runs_per_catheter() -> int:
-        return sum(1 if s.knobs_together else len(KNOBS) for s in wanted if s.name != "straight")
-
-    n_diag = int(trials) * diag_runs_per_catheter() if diagnose else 0
+    n_diag = int(trials) * sum(len(s.knob_groups) for s in wanted if s.bent) if diagnose else 0
     if diagnose and n_diag < 2:
         raise DataError("the diagnosis needs at least two Compensation+Shift runs per catheter: "
                         "add a bent scenario or trials, or leave the diagnosis out")
@@ -677,15 +684,25 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     shifts: list[ShiftRow] = []
     runs: list[Run] = []
     warnings: list[str] = []
+    detected: dict[tuple[str, str], dict[int, float]] = {}
+
+    def play(ci: int, cat: VirtualCatheter, s: Scenario, knobs: tuple[int, ...], trial: int, model: Model,
+             ctrl: str, label: str, stream: int) -> None:
+        """Compensate the reference with ``model`` as controller ``ctrl``, run it on the twin as
+        ``label`` with noise from ``stream``, and keep the run."""
+        cmd = _commands(model, refs[s.motion], ctrl, detected[cat.name, s.name], s, knobs)
+        run = simulate_motion(cat, s.shape(knobs[0]), commands=cmd, controller=label,
+                              seed=_seed(seed, stream, ci, SCENARIOS.index(s), knobs[0]), trial=trial)
+        runs.append(run.with_meta(scenario=s.name))
+        tick(f"{cat.name} {s.name}: trial {trial} {label}")
+
     for ci, cat in enumerate(cats):
         model = identify_catheter({k: source.sweep(cat, k) for k in KNOBS}, cat.name)
         models[cat.name] = model
         tick(f"{cat.name}: identified")
-        detected: dict[str, dict[int, float]] = {}
         for s in wanted:
-            si = SCENARIOS.index(s)
             offsets: dict[int, float] = {}
-            detected[s.name] = offsets
+            detected[cat.name, s.name] = offsets
             for k in KNOBS:
                 replay = source.replay(cat, s, k)
                 res = detect_shift(model, ReplayProbe(replay, k), k, step=DETECT_STEP,
@@ -697,51 +714,34 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
                                        None if true is None else true + d_true))
                 offsets[k] = res.offset
                 tick(f"{cat.name} {s.name}: knob {k} shift {res.offset:+.2f} deg")
-            ref = refs[s.motion]
-            groups = [tuple(KNOBS)] if s.knobs_together else [(k,) for k in KNOBS]
             for trial in range(1, int(trials) + 1):
-                for knobs in groups:
-                    shape = s.shape(knobs[0])
+                for knobs in s.knob_groups:
                     for ctrl in CONTROLLERS:
-                        if ctrl == "comp+shift" and s.name == "straight":
+                        if ctrl == "comp+shift" and not s.bent:
                             continue  # the paper's "-": no shift to apply on the straight shaft
-                        cmd = _commands(model, ref, ctrl, offsets, s, knobs)
                         # common noise across controllers within a cell (a paired comparison),
                         # independent across catheters, scenarios, knobs and trials
-                        run = simulate_motion(cat, shape, commands=cmd, controller=ctrl,
-                                              seed=_seed(seed, 3, ci, si, knobs[0]), trial=trial)
-                        runs.append(run.with_meta(scenario=s.name))
-                        tick(f"{cat.name} {s.name}: trial {trial} {ctrl}")
+                        play(ci, cat, s, knobs, trial, model, ctrl, ctrl, stream=3)
         if diagnose:
             aug, row = _diagnose_catheter(cat, model, [r for r in runs if r.meta.get("catheter") == cat.name
                                                        and r.meta.get("controller") == "comp+shift"])
             augmented[cat.name] = aug
             diagnoses.append(row)
             tick(f"{cat.name}: diagnosed " + (", ".join(n for n, _ in row.effects) or "no effect"))
-            for s in wanted:
-                if s.name == "straight":
-                    continue
-                si = SCENARIOS.index(s)
-                groups = [tuple(KNOBS)] if s.knobs_together else [(k,) for k in KNOBS]
+            for s in (s for s in wanted if s.bent):
                 for trial in range(1, int(trials) + 1):
-                    for knobs in groups:
-                        cmd = _commands(aug, refs[s.motion], "comp+shift", detected[s.name], s, knobs)
+                    for knobs in s.knob_groups:
                         # fresh noise (stream 4): the diagnosis was fitted on the stream-3 runs
-                        run = simulate_motion(cat, s.shape(knobs[0]), commands=cmd,
-                                              controller=DIAGNOSED, seed=_seed(seed, 4, ci, si, knobs[0]),
-                                              trial=trial)
-                        runs.append(run.with_meta(scenario=s.name))
-                        tick(f"{cat.name} {s.name}: trial {trial} {DIAGNOSED}")
+                        play(ci, cat, s, knobs, trial, aug, "comp+shift", DIAGNOSED, stream=4)
 
     cells: list[Cell] = []
     for s in wanted:
         sel = [r for r in runs if r.meta.get("scenario") == s.name]
         ev = metrics.evaluate_runs(sel, group_by=("controller",))
         warnings.extend(ev.warnings)
-        paper = PAPER_TABLE_I if s.table == "I" else PAPER_TABLE_II
         for g in ev.groups:
             ctrl = g.value("controller")
-            p = paper.get((ctrl, s.name))
+            p = PAPER_CELLS.get((ctrl, s.name))
             imp = {i.baseline: {"ptpe": i.ptpe, "rmse": i.rmse} for i in g.improvements}
             cells.append(Cell(s.table, s.name, ctrl, g.n, (g.ptpe_mean, g.ptpe_std), (g.rmse_mean, g.rmse_std),
                               None if p is None else p["ptpe"], None if p is None else p["rmse"], imp))
@@ -862,11 +862,8 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
              "met", "PTPE paper C+S", "PTPE ours C+S", "PTPE ours C+S+diagnosis")
     rows = []
     for scenario, c, target in result.beyond():
-        paper = {**PAPER_TABLE_I, **PAPER_TABLE_II}[("comp+shift", scenario)]
-        try:
-            ours = result.cell("comp+shift", scenario)
-        except KeyError:
-            continue
+        paper = PAPER_CELLS[("comp+shift", scenario)]
+        ours = result.cell("comp+shift", scenario)  # ran wherever the diagnosed controller did
         rows.append((scenario, _pair(paper["rmse"]), _pair(ours.rmse), _pair(c.rmse), f"<= {target:.2f}",
                      "yes" if c.rmse[0] <= target else "NO", _pair(paper["ptpe"]), _pair(ours.ptpe),
                      _pair(c.ptpe)))
@@ -973,7 +970,7 @@ def write_outputs(result: ExperimentResult, out_dir: str | Path, with_figures: b
 
 
 __all__ = [
-    "BEYOND_FACTOR", "CONTROLLERS", "Cell", "DIAGNOSED", "DiagnosisRow", "beyond_table", "DETECT_MAX_TRAVEL", "ExperimentResult", "PAPER_IMPROVEMENT", "PAPER_TABLE_I",
+    "BEYOND_FACTOR", "CONTROLLERS", "Cell", "DIAGNOSED", "DiagnosisRow", "PAPER_CELLS", "beyond_table", "DETECT_MAX_TRAVEL", "ExperimentResult", "PAPER_IMPROVEMENT", "PAPER_TABLE_I",
     "PAPER_TABLE_II", "SCENARIOS", "SCENARIOS_1DOF", "SCENARIO_2DOF", "Scenario", "ShiftRow", "TOLERANCE",
     "comparison_table", "figures", "identify_catheter", "record_replay", "record_sweep",
     "reference_nonperiodic", "reference_path", "reference_periodic", "render", "replay_motion",
