@@ -9,8 +9,8 @@ client opens like a USB serial port.
 
 The twin is anything with the interface of ``hystcli.twin.LiveTwin``: ``move(knob, q_target,
 speed_deg_s=...) -> (knob_angle, motor_current, tip_angle)``, ``state(knob)`` (same triple),
-``tip_available`` and the catheter it simulates; the optional features need ``move(..., dt=...)``
-and ``hold(duration, dt=...)`` too. Besides the base protocol the emulator serves the optional
+``tip_available`` and the catheter it simulates; the optional features need ``move(..., dt=...)``,
+``hold(duration, dt=...)`` and ``last_samples(knob)`` too. Besides the base protocol the emulator serves the optional
 features ``dwell`` and ``mean`` (a MOVE that holds the target before answering and reports the
 mean current over its last samples), so the live probe of Algorithm 1 reads a current averaged
 like the replay probe's. POSIX only (pseudo-terminals).
@@ -117,11 +117,6 @@ class DeviceEmulator:
         Optional protocol features to announce and serve (default: all of
         ``hystcli.device.FEATURES``: ``dwell`` and ``mean``); ``()`` makes a device of the base
         protocol, which refuses MOVE options with ``E_ARG``.
-    mean_every : int
-        The ``mean`` of a MOVE takes every ``mean_every``-th sample of the hold (every sample
-        of the motion). The twin reports one sample per call, so this sets the emulator's cost;
-        the current is low-passed at 20 Hz (correlated over tens of ms), so 5 ms between
-        averaged samples loses next to nothing against averaging all of them.
 
     Attributes
     ----------
@@ -132,16 +127,13 @@ class DeviceEmulator:
 
     def __init__(self, twin: Any, *, name: str = "hyst-sim", travel_limit: float = 170.0,
                  default_speed: float = 20.0, faults: Iterable[Fault] = (),
-                 features: Sequence[str] = FEATURES, mean_every: int = 5) -> None:
+                 features: Sequence[str] = FEATURES) -> None:
         self.twin = twin
         catheter = getattr(twin, "catheter", None)
         knobs = tuple(int(k) for k in getattr(twin, "knobs", (1, 2)))
         unknown = [f for f in features if f not in FEATURES]
         if unknown:
             raise DataError(f"unknown protocol feature {unknown[0]!r} (known: {', '.join(FEATURES)})")
-        if int(mean_every) < 1:
-            raise DataError(f"mean_every must be >= 1, got {mean_every}")
-        self.mean_every = int(mean_every)
         self.info = DeviceInfo(PROTOCOL_VERSION, name,
                                str(getattr(catheter, "name", catheter or "unknown")), knobs,
                                bool(getattr(twin, "tip_available", True)), {"fw": "hystcli-emulator"},
@@ -283,59 +275,23 @@ class DeviceEmulator:
         """Move the twin, hold it ``dwell`` s and, when asked, average the last ``mean`` s.
 
         Returns ``(q, c, tip, (q_mean, c_mean, t_mean) or None)``. The twin advances in whole
-        samples of :attr:`SAMPLE_DT`; the samples inside the averaging window are stepped one by
-        one (every sample of the motion, every :attr:`mean_every`-th of the hold: the twin
-        reports only its last sample), those before the window in one batch each.
+        samples of :attr:`SAMPLE_DT`; the window is the last ``mean`` s of the move's and the
+        hold's samples (:meth:`LiveTwin.last_samples`), clipped to them.
         """
         twin, dt = self.twin, self.SAMPLE_DT
         n_dwell = int(round(dwell / dt)) if dwell > 0 else 0
+        q, c, y = twin.move(knob, angle, speed_deg_s=speed, dt=dt)
+        parts = [twin.last_samples(knob)]
+        if n_dwell:
+            twin.hold(n_dwell * dt, dt=dt)
+            parts.append(twin.last_samples(knob))
+            q, c, y = twin.state(knob)
         if mean is None:
-            # a plain MOVE needs nothing of the twin but move() (its own sampling)
-            q, c, y = twin.move(knob, angle, speed_deg_s=speed)
-            if n_dwell:
-                twin.hold(n_dwell * dt, dt=dt)
-                q, c, y = twin.state(knob)
             return q, c, y, None
-        q0 = float(twin.state(knob)[0])
-        # the twin's own sampling of a move: n samples, the last one on the target
-        n_move = max(1, int(math.ceil(abs(angle - q0) / (speed * dt) - 1e-9)))
-        n_win = min(max(1, int(round(mean / dt))), n_move + n_dwell)
-        before = n_move + n_dwell - n_win        # samples before the window, in batches
-        qs: list[float] = []
-        cs: list[float] = []
-        ws: list[float] = []   # samples of the window each reading stands for (a time weight)
-
-        def take(st: Sequence[float], weight: int = 1) -> None:
-            qs.append(float(st[0]))
-            cs.append(float(st[1]))
-            ws.append(float(weight))
-
-        if before >= n_move:
-            twin.move(knob, angle, speed_deg_s=speed, dt=dt)
-            if before > n_move:
-                twin.hold((before - n_move) * dt, dt=dt)
-        else:
-            if before > 0:
-                # the twin samples a move at q0 + (target - q0) * j / n: stopping after `before`
-                # samples and going on one by one walks the very same sample points
-                twin.move(knob, q0 + (angle - q0) * before / n_move, speed_deg_s=speed, dt=dt)
-            for i in range(before + 1, n_move + 1):
-                take(twin.move(knob, angle if i == n_move else q0 + (angle - q0) * i / n_move,
-                               speed_deg_s=speed, dt=dt))
-        left = n_win - len(qs)                   # window samples of the hold
-        if left:
-            # the hold's window is [end - left*dt, end): read every mean_every-th sample of it,
-            # the last one included, each standing for mean_every samples
-            every = min(self.mean_every, left)
-            head = left - every * (left // every)
-            if head:
-                twin.hold(head * dt, dt=dt)
-            for _ in range(left // every):
-                twin.hold(every * dt, dt=dt)
-                take(twin.state(knob), every)
-        q, c, y = twin.state(knob)
-        return q, c, y, (float(np.average(qs, weights=ws)), float(np.average(cs, weights=ws)),
-                         n_win * dt)
+        qs = np.concatenate([p[0] for p in parts])
+        cs = np.concatenate([p[1] for p in parts])
+        n_win = min(max(1, int(round(mean / dt))), qs.size)
+        return q, c, y, (float(qs[-n_win:].mean()), float(cs[-n_win:].mean()), n_win * dt)
 
     def _knob(self, text: str) -> int | None:
         try:

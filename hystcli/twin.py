@@ -435,6 +435,7 @@ class LiveTwin:
         self._rng_em = np.random.default_rng(em_seq)
         self.t = 0.0
         self._started = False
+        self._last: dict[int, tuple[np.ndarray, np.ndarray]] = {}
         self._q = {k: 0.0 for k in self.knobs}
         self._c = {k: catheter.current.no_load for k in self.knobs}
         self._y = {k: 0.0 for k in self.knobs}
@@ -496,7 +497,7 @@ class LiveTwin:
             t = np.concatenate([[self.t], t])
             self._started = True
         qs = {j: (qk if j == k else np.full(t.shape, self._q[j])) for j in self.knobs}
-        self._advance(t, qs, dt)
+        self._advance(t, qs, dt, n)
         return self.state(k)
 
     def hold(self, duration: float, dt: float = 0.001) -> None:
@@ -506,9 +507,10 @@ class LiveTwin:
         if not self._started:
             t = np.concatenate([[self.t], t])
             self._started = True
-        self._advance(t, {j: np.full(t.shape, self._q[j]) for j in self.knobs}, dt)
+        self._advance(t, {j: np.full(t.shape, self._q[j]) for j in self.knobs}, dt, n)
 
-    def _advance(self, t: np.ndarray, qs: Mapping[int, np.ndarray], dt: float) -> None:
+    def _advance(self, t: np.ndarray, qs: Mapping[int, np.ndarray], dt: float, n: int) -> None:
+        # n: the samples this move or hold took (t may start with the robot's first sample at rest)
         ys, cs = _knob_signals(self.catheter, self._models, qs, t, self.effects, self.shape,
                                self._chain, self._cur)
         if self._sos_dt != dt and self.filter_hz is not None:
@@ -524,6 +526,7 @@ class LiveTwin:
                 cf, self._zi[k] = signal.sosfilt(self._sos, c, zi=self._zi[k])
             else:
                 cf = c
+            self._last[k] = (np.asarray(qs[k][-n:], dtype=float), cf[-n:])
             self._q[k] = float(qs[k][-1])
             self._c[k] = float(cf[-1])
             self._y[k] = float(ys[k][-1])
@@ -542,6 +545,12 @@ class LiveTwin:
         else:
             tip = self._y[k]
         return self._q[k], self._c[k], tip
+
+    def last_samples(self, knob: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(knob angles, filtered motor currents)`` of every sample of the last move or hold
+        (what a controller sampling at ``dt`` saw; empty before the first one)."""
+        k = self._check_knob(knob)
+        return self._last.get(k, (np.empty(0), np.empty(0)))
 
     def recorded(self) -> Run:
         """Every sample so far (needs ``record=True``): ``t``, ``q<k>``, ``y<k>`` (noise-free

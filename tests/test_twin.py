@@ -161,6 +161,23 @@ def test_live_twin_current_reads_while_moving_and_flat_at_rest_in_the_dead_zone(
         live.move(2, 1.0)
 
 
+def test_live_twin_keeps_the_samples_of_its_last_move_or_hold():
+    live = twin.LiveTwin(CAT, noise=False, filter_hz=None, knobs=(1,))
+    assert live.last_samples(1)[0].size == 0
+    # 0 -> 1 deg at 5 deg/s sampled every 1 ms: 200 samples at q_i = i / 200 (i = 1..200); the
+    # robot's first sample at rest (q = 0) is not part of the move
+    live.move(1, 1.0, speed_deg_s=5.0)
+    q, c = live.last_samples(1)
+    np.testing.assert_allclose(q, np.arange(1, 201) / 200, atol=1e-12)
+    # in the dead zone, unfiltered and noise-free: no-load 120 mA + the Coulomb term of a motor
+    # moving at 5 deg/s (6 tanh(5 / 0.5)), and its last value is what the move reported
+    np.testing.assert_allclose(c, 120.0 + 6.0 * math.tanh(5.0 / 0.5), atol=1e-9)
+    assert c[-1] == live.state(1)[1]
+    live.hold(0.05)
+    q, c = live.last_samples(1)
+    assert q.size == 50 and np.all(q == 1.0)
+
+
 def test_live_twin_is_deterministic_under_a_seed_and_can_lack_a_tracker():
     def session(seed, **kw):
         live = twin.LiveTwin(CAT, seed=seed, **kw)
