@@ -32,10 +32,10 @@ import numpy as np
 from numba import njit
 from scipy.optimize import OptimizeResult, least_squares
 
-from .errors import IdentificationError, ModelError
-from .filters import lowpass
-from .io import Run, atomic_write
-from .model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
+from ..errors import IdentificationError, ModelError
+from ..filters import lowpass
+from ..io import Run, atomic_write
+from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
 
 MIN_SAMPLES = 100
 """Fewest samples of a sweep :func:`check_sweep` accepts."""

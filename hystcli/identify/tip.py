@@ -1,0 +1,494 @@
+"""Output-error fit of one knob's seven tip parameters through the clamp recursion.
+
+The model of DESIGN.md section 3 is simulated from the first sample with the recorded knob
+commands and fitted to every measured tip angle by least squares: an *output-error* fit, so a
+record is usable however it starts (at rest, on a backlash plateau, with a tendon taut) and
+however many cycles it holds, as long as the knob passes the dead-zone edges.
+
+Knob-degree form
+----------------
+With :math:`\\Delta = (H_{neg} - H_{pos})/\\omega` and :math:`H_{mid} = (H_{pos}+H_{neg})/2`,
+both envelopes are :math:`H_{mid} + \\omega\\, z(u)` where the *geometry*
+``g = (D_neg, D_pos, B_pos, B_neg, Delta)`` (all in degrees of knob) fixes ``z``::
+
+    z_up(u) = -Delta/2 + min(u - Dhat_pos, 0) + max(u - D_pos, 0),   Dhat_pos = D_neg + B_neg - Delta
+    z_dn(u) = +Delta/2 + min(u - D_neg, 0) + max(u - Dhat_neg, 0),   Dhat_neg = D_pos - B_pos + Delta
+
+and because :math:`\\omega > 0` the clamp recursion commutes with that affine map:
+:math:`y_t = H_{mid} + \\omega z_t`, :math:`z_t = \\min(\\max(z_{t-1}, z_{up}), z_{dn})`. So for a
+given geometry the tip is *linear* in :math:`(H_{mid}, \\omega)`: the global search scores tens
+of thousands of geometries with a two-parameter linear least squares each (variable
+projection), in one compiled loop, before any local optimiser runs.
+
+Fit
+---
+1. Global search over a grid of geometries spanning the swept knob range (dead-zone centre and
+   width, backlash as a fraction of the widest valid backlash, Delta), three initial states
+   each (the record may start anywhere between the envelopes).
+2. Local refinement (trust-region least squares, soft-L1 loss scaled to the noise, so tracker
+   outliers do not pull) of all eight unknowns ``(D_neg, W, f_pos, f_neg, Delta, omega, H_mid,
+   z_init)`` from the best distinct grid points and any start given (the current's reading);
+   the parameterisation keeps every trial model valid (``W = D_pos - D_neg >= 0``,
+   ``Delta >= 0``, ``B = f (W + Delta)`` with ``f`` in [0, 1]).
+3. Uncertainty: the Gauss-Newton covariance of the plain least-squares problem on the inliers,
+   its residual variance inflated by the residuals' integrated autocorrelation time (a
+   filtered tracker makes neighbouring samples share their noise).
+4. Identifiability: a parameter the record cannot fix (its Jacobian column vanishes, or its
+   uncertainty is a sizeable part of the swept range, or the loaded stretch that fixes it is
+   missing) is named with the reason, never returned silently.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+from scipy.optimize import least_squares
+
+from ..model import KnobModel
+from .sweep import decimation_index
+
+PARAMS = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg")
+"""The seven parameters the tip fit identifies (the offset is 0 on a straight shaft)."""
+
+MAX_SAMPLES = 6000
+"""Most samples the local fit evaluates; longer records are decimated (reversals kept)."""
+
+SEARCH_SAMPLES = 1200
+"""Samples the global grid search scores each geometry on."""
+
+N_STARTS = 6
+"""Distinct grid points refined by the local optimiser."""
+
+# theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
+_LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
+_HI = np.array([np.inf, np.inf, 1.0, 1.0, np.inf, np.inf, np.inf, np.inf])
+_THETA = ("d_neg", "width", "f_pos", "f_neg", "delta", "omega", "h_mid", "z_init")
+
+
+# --------------------------------------------------------------------------------------------
+# compiled kernels
+# --------------------------------------------------------------------------------------------
+@njit(cache=True)
+def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
+    dhp = dn + bn - dh
+    dhn = dp - bp + dh
+    half = 0.5 * dh
+    z = z_init
+    for i in range(q.shape[0]):
+        u = q[i]
+        lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+        hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+        if z < lo:
+            z = lo
+        if z > hi:
+            z = hi
+        out[i] = z
+
+
+@njit(cache=True)
+def _batch_kernel(q, y, cands, out):
+    # SSE after the best (h_mid, omega >= 1e-3) of every candidate geometry, best of three
+    # initial states (at the ascending envelope, the descending one, midway)
+    n = q.shape[0]
+    syy = 0.0
+    sy = 0.0
+    for i in range(n):
+        sy += y[i]
+        syy += y[i] * y[i]
+    for m in range(cands.shape[0]):
+        dn = cands[m, 0]
+        dp = cands[m, 1]
+        bp = cands[m, 2]
+        bn = cands[m, 3]
+        dh = cands[m, 4]
+        dhp = dn + bn - dh
+        dhn = dp - bp + dh
+        half = 0.5 * dh
+        u0 = q[0]
+        lo0 = -half + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
+        hi0 = half + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
+        best = 1e300
+        for s in range(3):
+            if s == 0:
+                z = lo0
+            elif s == 1:
+                z = hi0
+            else:
+                z = 0.5 * (lo0 + hi0)
+            sz = 0.0
+            szz = 0.0
+            szy = 0.0
+            for i in range(n):
+                u = q[i]
+                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+                if z < lo:
+                    z = lo
+                if z > hi:
+                    z = hi
+                sz += z
+                szz += z * z
+                szy += z * y[i]
+            den = n * szz - sz * sz
+            if den > 1e-12 * n * n:
+                w = (n * szy - sz * sy) / den
+            else:
+                w = 1e-3
+            if w < 1e-3:
+                w = 1e-3
+            a = (sy - w * sz) / n
+            sse = syy - 2.0 * a * sy - 2.0 * w * szy + n * a * a + 2.0 * a * w * sz + w * w * szz
+            if sse < best:
+                best = sse
+        out[m] = best
+
+
+def z_path(q: np.ndarray, geometry, z_init: float) -> np.ndarray:
+    """``z`` of the knob-degree form for geometry ``(d_neg, d_pos, b_pos, b_neg, delta)``."""
+    out = np.empty(q.size)
+    _z_kernel(np.ascontiguousarray(q, dtype=np.float64), *map(float, geometry), float(z_init), out)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# parameterisation
+# --------------------------------------------------------------------------------------------
+def _geometry(th: np.ndarray) -> tuple[float, float, float, float, float]:
+    d_neg, w, f_pos, f_neg, dh = th[:5]
+    span = w + dh
+    return d_neg, d_neg + w, f_pos * span, f_neg * span, dh
+
+
+def _params(th: np.ndarray) -> np.ndarray:
+    """The seven model parameters (:data:`PARAMS` order) of a theta vector."""
+    d_neg, d_pos, b_pos, b_neg, dh = _geometry(th)
+    omega, h_mid = th[5], th[6]
+    return np.array([d_pos, d_neg, b_pos, b_neg, omega, h_mid - 0.5 * omega * dh, h_mid + 0.5 * omega * dh])
+
+
+def _params_jacobian(th: np.ndarray) -> np.ndarray:
+    """d(params)/d(theta), (7, 8): carries the covariance from theta to the model's parameters."""
+    d_neg, w, f_pos, f_neg, dh, omega, h_mid, _ = th
+    span = w + dh
+    g = np.zeros((7, 8))
+    g[0, 0] = 1.0
+    g[0, 1] = 1.0                      # d_pos = d_neg + w
+    g[1, 0] = 1.0                      # d_neg
+    g[2, 1] = f_pos
+    g[2, 2] = span
+    g[2, 4] = f_pos                    # b_pos = f_pos (w + dh)
+    g[3, 1] = f_neg
+    g[3, 3] = span
+    g[3, 4] = f_neg                    # b_neg
+    g[4, 5] = 1.0                      # omega
+    g[5, 4] = -0.5 * omega
+    g[5, 5] = -0.5 * dh
+    g[5, 6] = 1.0                      # h_pos = h_mid - omega dh / 2
+    g[6, 4] = 0.5 * omega
+    g[6, 5] = 0.5 * dh
+    g[6, 6] = 1.0                      # h_neg
+    return g
+
+
+def theta_from_model(m: KnobModel, z_init: float) -> np.ndarray:
+    """A theta vector (clipped into the valid box) for a start given as a model."""
+    w = max(m.d_pos - m.d_neg, 0.0)
+    dh = max((m.h_neg - m.h_pos) / m.omega, 0.0)
+    span = max(w + dh, 1e-9)
+    return np.array([m.d_neg, w, min(m.b_pos / span, 1.0), min(m.b_neg / span, 1.0), dh,
+                     m.omega, 0.5 * (m.h_pos + m.h_neg), z_init])
+
+
+def model_of(th: np.ndarray) -> KnobModel:
+    return KnobModel(**dict(zip(PARAMS, map(float, _params(th)))))
+
+
+def predict(th: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """The tip the theta vector predicts on ``q`` (its own initial state)."""
+    return th[6] + th[5] * z_path(q, _geometry(th), th[7])
+
+
+# --------------------------------------------------------------------------------------------
+# the global search
+# --------------------------------------------------------------------------------------------
+def _candidates(q_min: float, q_max: float) -> np.ndarray:
+    span = q_max - q_min
+    centres = np.linspace(q_min + 0.04 * span, q_max - 0.04 * span, 19)
+    widths = np.concatenate([[0.0], np.geomspace(0.015 * span, 0.9 * span, 13)])
+    fracs = np.array([0.0, 0.12, 0.3, 0.5, 0.75, 1.0])
+    deltas = np.array([0.0, 0.04, 0.12, 0.3]) * span
+    rows = []
+    for c in centres:
+        for w in widths:
+            dn, dp = c - 0.5 * w, c + 0.5 * w
+            if dn < q_min or dp > q_max:
+                continue
+            for dh in deltas:
+                s = w + dh
+                for fp in fracs:
+                    for fn in fracs:
+                        rows.append((dn, dp, fp * s, fn * s, dh))
+    return np.unique(np.array(rows), axis=0)
+
+
+def _linear_part(z: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    a = np.column_stack([np.ones_like(z), z])
+    (h_mid, omega), *_ = np.linalg.lstsq(a, y, rcond=None)
+    return float(h_mid), float(max(omega, 1e-3))
+
+
+def _start_from_geometry(g, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    dn, dp, bp, bn, dh = map(float, g)
+    span = max(dp - dn + dh, 1e-9)
+    best = None
+    for zi in _initial_states(q[0], g):
+        z = z_path(q, g, zi)
+        h_mid, omega = _linear_part(z, y)
+        sse = float(np.sum((y - h_mid - omega * z) ** 2))
+        if best is None or sse < best[0]:
+            best = (sse, np.array([dn, dp - dn, min(bp / span, 1.0), min(bn / span, 1.0), dh,
+                                   omega, h_mid, zi]))
+    return best[1]
+
+
+def _initial_states(u0: float, g) -> tuple[float, float, float]:
+    dn, dp, bp, bn, dh = map(float, g)
+    dhp, dhn = dn + bn - dh, dp - bp + dh
+    lo = -0.5 * dh + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
+    hi = 0.5 * dh + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
+    return lo, hi, 0.5 * (lo + hi)
+
+
+def _distinct_best(cands: np.ndarray, sse: np.ndarray, k: int, span: float) -> list[np.ndarray]:
+    order = np.argsort(sse, kind="stable")
+    picked: list[np.ndarray] = []
+    for i in order:
+        g = cands[i]
+        if all(abs(g[0] - p[0]) > 0.03 * span or abs(g[1] - p[1]) > 0.03 * span for p in picked):
+            picked.append(g)
+        if len(picked) >= k:
+            break
+    return picked
+
+
+# --------------------------------------------------------------------------------------------
+# the local fit
+# --------------------------------------------------------------------------------------------
+def _residuals(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    return predict(th, q) - y
+
+
+def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float, loss: str = "soft_l1"):
+    inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
+    th0 = np.minimum(np.maximum(np.asarray(th0, float), _LO + inner), _HI - inner)
+    span = float(np.ptp(q)) or 1.0
+    x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1,
+                        max(1.0, f_scale), 0.05 * span])
+    return least_squares(_residuals, th0, bounds=(_LO, _HI), args=(q, y), loss=loss,
+                         f_scale=f_scale, x_scale=x_scale, diff_step=1e-7, max_nfev=600)
+
+
+def _robust_sd(r: np.ndarray) -> float:
+    r = np.asarray(r, float)
+    return float(1.4826 * np.median(np.abs(r - np.median(r))))
+
+
+def autocorrelation_time(resid: np.ndarray) -> float:
+    """Integrated autocorrelation time of residuals (1 for white noise).
+
+    How many neighbouring samples share one piece of information: a 20 Hz filter on a 1 kHz
+    tracker makes it tens. Summed up to the first lag where the autocorrelation falls below 0.05.
+    """
+    r = np.asarray(resid, float) - float(np.mean(resid))
+    var = float(r @ r)
+    n = r.size
+    if var <= 0 or n < 4:
+        return 1.0
+    nfft = 1 << (2 * n - 1).bit_length()
+    f = np.fft.rfft(r, nfft)
+    acf = np.fft.irfft(f * np.conj(f), nfft)[:n] / var
+    below = np.flatnonzero(acf[1:min(n, 5000)] < 0.05)
+    stop = int(below[0]) + 1 if below.size else min(n, 5000)
+    return float(1.0 + 2.0 * np.sum(acf[1:stop]))
+
+
+@dataclass(frozen=True)
+class TipFit:
+    """The output-error fit of one knob.
+
+    Attributes
+    ----------
+    model : KnobModel
+        The fitted straight-shaft model (offset 0).
+    stderr : dict of str to float
+        One-sigma uncertainty of each of :data:`PARAMS` (inf when the record cannot fix it).
+    rmse : float
+        RMSE of the model, started from the record's first measured tip angle (DESIGN.md
+        section 3), against every sample (deg).
+    noise : float
+        Robust standard deviation of the fit's residuals (deg).
+    tau : float
+        Integrated autocorrelation time of the residuals (samples of the fitted set).
+    z_init : float
+        Fitted initial state (knob-degree form) before the first sample.
+    theta : numpy.ndarray
+        The fitted theta vector (for predictions with its own initial state).
+    unidentified : dict of str to str
+        Parameters the record cannot fix, each with the reason.
+    n_samples : int
+        Samples the local fit used.
+    """
+
+    model: KnobModel
+    stderr: dict[str, float]
+    rmse: float
+    noise: float
+    tau: float
+    z_init: float
+    theta: np.ndarray = field(repr=False)
+    unidentified: dict[str, str] = field(default_factory=dict)
+    n_samples: int = 0
+
+
+def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
+            keep: np.ndarray | None = None) -> TipFit:
+    """Fit the seven tip parameters to a record by output error.
+
+    Parameters
+    ----------
+    q, y : numpy.ndarray
+        Knob commands and measured tip angles (deg), finite, same length.
+    starts : tuple of KnobModel
+        Extra starting models for the local fit (e.g. the current's reading).
+    keep : numpy.ndarray of int, optional
+        Sample indices that a decimation must keep (the reversals).
+
+    Returns
+    -------
+    TipFit
+    """
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    q_min, q_max = float(np.min(q)), float(np.max(q))
+    span = q_max - q_min
+    fit_idx = decimation_index(q, MAX_SAMPLES, keep)
+    qf, yf = q[fit_idx], y[fit_idx]
+    search_idx = decimation_index(qf, SEARCH_SAMPLES)
+    qs, ys = np.ascontiguousarray(qf[search_idx]), np.ascontiguousarray(yf[search_idx])
+
+    cands = _candidates(q_min, q_max)
+    sse = np.empty(cands.shape[0])
+    _batch_kernel(qs, ys, cands, sse)
+    thetas = [_start_from_geometry(g, qf, yf) for g in _distinct_best(cands, sse, N_STARTS, span)]
+    for m in starts:
+        zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
+        thetas.append(theta_from_model(m, zi))
+
+    # noise scale for the robust loss: the best start's residual spread
+    r0 = min((_residuals(th, qf, yf) for th in thetas), key=lambda r: float(r @ r))
+    f_scale = max(3.0 * _robust_sd(r0), 1e-6 * max(1.0, float(np.ptp(y))))
+    best = None
+    for th in thetas:
+        res = _refine(th, qf, yf, f_scale)
+        if best is None or res.cost < best.cost:
+            best = res
+    # a second pass with the scale of the winner's own residuals
+    sd = _robust_sd(best.fun)
+    f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
+    best = _refine(best.x, qf, yf, f_scale)
+    th = best.x
+    model = model_of(th)
+    resid = _residuals(th, qf, yf)
+    noise = _robust_sd(resid)
+    rmse = float(np.sqrt(np.mean((model.forward(q, float(y[0])) - y) ** 2)))
+    stderr, tau = _stderr(th, qf, yf, resid, noise)
+    unident = _unidentified(th, model, qf, stderr, span, noise)
+    return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
+                  theta=th, unidentified=unident, n_samples=int(qf.size))
+
+
+def _jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    # central differences of the residuals; steps a small fraction of each parameter's scale
+    span = float(np.ptp(q)) or 1.0
+    steps = np.array([1e-4 * span, 1e-4 * span, 1e-4, 1e-4, 1e-4 * span, 1e-5 * max(th[5], 1e-3),
+                      1e-4 * max(1.0, abs(th[6])), 1e-4 * span])
+    jac = np.empty((q.size, th.size))
+    for j in range(th.size):
+        hi, lo = th.copy(), th.copy()
+        hi[j] = min(hi[j] + steps[j], _HI[j])
+        lo[j] = max(lo[j] - steps[j], _LO[j])
+        jac[:, j] = (_residuals(hi, q, y) - _residuals(lo, q, y)) / (hi[j] - lo[j])
+    return jac
+
+
+def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
+            noise: float) -> tuple[dict[str, float], float]:
+    inl = np.abs(resid - np.median(resid)) <= max(4.0 * noise, 1e-12)
+    r = resid[inl]
+    tau = autocorrelation_time(r)
+    jac = _jacobian(th, q, y)[inl]
+    dof = max(r.size - th.size, 1)
+    s2 = float(r @ r) / dof * tau
+    jtj = jac.T @ jac
+    # parameters with no influence on the residuals are not estimable: infinite variance
+    dead = np.sqrt(np.diag(jtj)) <= 1e-9 * max(1.0, float(np.sqrt(np.max(np.diag(jtj)))))
+    cov = np.full((th.size, th.size), np.nan)
+    live = ~dead
+    if live.any():
+        sub = jtj[np.ix_(live, live)]
+        cov[np.ix_(live, live)] = np.linalg.pinv(sub) * s2
+    g = _params_jacobian(th)
+    out = {}
+    for i, name in enumerate(PARAMS):
+        row = g[i]
+        if np.any(dead & (np.abs(row) > 0)):
+            out[name] = math.inf
+            continue
+        c = cov[np.ix_(live, live)]
+        v = float(row[live] @ c @ row[live])
+        out[name] = math.sqrt(max(v, 0.0))
+    return out, tau
+
+
+def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[str, float],
+                  span: float, noise: float) -> dict[str, str]:
+    """Parameters the record cannot fix, with the physical reason (see the module docstring)."""
+    out: dict[str, str] = {}
+    g = _geometry(th)
+    z = z_path(q, g, th[7])
+    d_neg, d_pos, b_pos, b_neg, dh = g
+    dhat_pos, dhat_neg = d_neg + b_neg - dh, d_pos - b_pos + dh
+    dq = np.diff(q, prepend=q[0])
+    # where the tip sits: on which envelope and which piece of it
+    up_loaded = (q > d_pos) & np.isclose(z, -0.5 * dh + (q - d_pos), atol=1e-9) & (dq >= 0)
+    dn_loaded = (q < d_neg) & np.isclose(z, 0.5 * dh + (q - d_neg), atol=1e-9) & (dq <= 0)
+    min_stretch = max(1.0, 4.0 * noise / max(model.omega, 1e-3))
+    for name, mask, edge, side in (("d_pos", up_loaded, d_pos, "positive"),
+                                   ("d_neg", dn_loaded, d_neg, "negative")):
+        stretch = float(np.ptp(q[mask])) if mask.sum() >= 3 else 0.0
+        reach = np.max(q) if side == "positive" else np.min(q)
+        if stretch < min_stretch:
+            out[name] = (f"the knob never moves the tip {side} past the dead zone: the fitted edge "
+                         f"{edge:.2f} deg is within {stretch:.2f} deg of the sweep's reach "
+                         f"({reach:.2f} deg); sweep further")
+    # backlash: after a reversal beyond the edge plus Delta the tip leaves its plateau on the
+    # unloading slope, which is what fixes the plateau's width
+    dn_unload = (q > dhat_neg) & np.isclose(z, 0.5 * dh + (q - dhat_neg), atol=1e-9) & (dq < 0)
+    up_unload = (q < dhat_pos) & np.isclose(z, -0.5 * dh + (q - dhat_pos), atol=1e-9) & (dq > 0)
+    for name, mask, need, side in (("b_pos", dn_unload, d_pos + dh, "top"),
+                                   ("b_neg", up_unload, d_neg - dh, "bottom")):
+        stretch = float(np.ptp(q[mask])) if mask.sum() >= 3 else 0.0
+        if stretch < min_stretch and name not in out:
+            out[name] = (f"after the {side} reversal the tip never leaves its backlash plateau onto "
+                         f"the unloading slope (needs a reversal beyond {need:.2f} deg); sweep further")
+    for name in PARAMS:
+        if name in out:
+            continue
+        s = stderr.get(name, math.inf)
+        limit = 0.25 * span if name not in ("omega",) else 0.5 * max(model.omega, 1e-3)
+        if not math.isfinite(s) or s > limit:
+            out[name] = (f"the record leaves it undetermined (one-sigma uncertainty "
+                         f"{s:.3g}{'' if name == 'omega' else ' deg'})")
+    return out
