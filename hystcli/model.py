@@ -421,10 +421,12 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EffectSpec:
-    """An unmodelled effect attached to a model (DESIGN.md section 8): its name and parameters."""
+    """An unmodelled effect attached to a model (DESIGN.md section 8): its name, parameters and
+    form ("" for the effect's default form, which is what a version 1 entry without one means)."""
 
     name: str
     params: Mapping[str, float] = field(default_factory=dict)
+    form: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
@@ -549,6 +551,26 @@ class Model:
         if 2 in self.knobs:
             offs[2] = n2
         return self.with_offsets(offs)
+
+    def predict(self, run) -> "object":
+        """The run with ``y<k>`` replaced by what the model and its effects predict for its
+        commands (a measured ``y<k>`` kept as ``y<k>_measured``): what ``hyst predict`` writes.
+
+        Returns a :class:`hystcli.io.Run` (see :func:`hystcli.compensation.predict`).
+        """
+        from .compensation import predict
+
+        return predict(self, run)
+
+    def compensate(self, reference, ignore_shift: bool = False) -> "object":
+        """Knob commands that make the model and its effects follow ``reference``'s ``r<k>``:
+        what ``hyst compensate`` writes, with its warnings.
+
+        Returns a :class:`hystcli.compensation.Compensation` (its ``run`` is the file).
+        """
+        from .compensation import compensate
+
+        return compensate(self, reference, ignore_shift=ignore_shift)
 
     def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
         """Which offset each knob uses for a run with metadata ``meta`` (DESIGN.md section 6).
