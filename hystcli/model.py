@@ -159,16 +159,24 @@ class KnobModel:
                 f"(d_neg = {self.d_neg:g} > dhat_neg = {self.dhat_neg:g})"
             )
         # Both envelopes are piecewise linear with equal outer slopes, so f_up <= f_dn everywhere
-        # exactly when it holds at the four breakpoints.
-        us = np.array([self.dhat_pos, self.d_pos, self.d_neg, self.dhat_neg])
-        gap = self.f_dn(us) - self.f_up(us)
-        if np.min(gap) < -_TOL * max(1.0, float(np.max(np.abs(us)))):
-            worst = us[int(np.argmin(gap))]
+        # exactly when it holds at the four breakpoints (scalar arithmetic: a model is built for
+        # every condition the diagnosis tries, and numpy's per-call cost dominated it)
+        us = (self.dhat_pos, self.d_pos, self.d_neg, self.dhat_neg)
+        gaps = [self._gap(u) for u in us]
+        worst_gap = min(gaps)
+        if worst_gap < -_TOL * max(1.0, max(abs(u) for u in us)):
+            worst = us[gaps.index(worst_gap)]
             raise ModelError(
                 "invalid model: f_up <= f_dn everywhere is violated "
-                f"(the ascending envelope passes the descending one by {-np.min(gap):.3g} deg "
+                f"(the ascending envelope passes the descending one by {-worst_gap:.3g} deg "
                 f"at u = {worst:g})"
             )
+
+    def _gap(self, u: float) -> float:
+        # f_dn(u) - f_up(u) for one u, as f_dn and f_up compute it
+        up = self.h_pos + self.omega * (min(u - self.dhat_pos, 0.0) + max(u - self.d_pos, 0.0))
+        dn = self.h_neg + self.omega * (min(u - self.d_neg, 0.0) + max(u - self.dhat_neg, 0.0))
+        return dn - up
 
     # -- derived parameters -------------------------------------------------------------------
     @property

@@ -116,16 +116,32 @@ def wsse(preps: Sequence[Prep], w: np.ndarray, effs: Sequence[E.Effect]) -> floa
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class GridPoint:
-    """One point of a family's search grid: a form and its parameters."""
+    """One point of a family's search grid: a form, its parameters and the effect they make
+    (None where they are outside the form's domain)."""
 
     form: str
     params: Mapping[str, float]
+    effect: E.Effect | None = None
+
+
+_GRIDS: dict[str, list[GridPoint]] = {}
 
 
 def family_grid(etype: EffectType) -> list[GridPoint]:
     """Every form's grid, one after the other: the family is one candidate with a larger grid, so
-    a fold picks the form as it picks the parameters, on its training runs alone."""
-    return [GridPoint(f.name, g) for f in etype.forms for g in f.grid()]
+    a fold picks the form as it picks the parameters, on its training runs alone. Built once."""
+    grid = _GRIDS.get(etype.name)
+    if grid is None:
+        grid = []
+        for f in etype.forms:
+            for g in f.grid():
+                try:
+                    eff = make(etype, f.name, g)
+                except ModelError:
+                    eff = None
+                grid.append(GridPoint(f.name, g, eff))
+        _GRIDS[etype.name] = grid
+    return grid
 
 
 def null_distance(etype: EffectType, grid: Sequence[GridPoint]) -> np.ndarray:
@@ -159,8 +175,9 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
                 T[i, j] = base_sse[i]
                 continue
             try:
-                eff = make(etype, g.form, g.params)
-                T[i, j] = _sse_from_cut(p, base, eff, cuts)
+                if g.effect is None:
+                    raise ModelError("outside the domain")
+                T[i, j] = _sse_from_cut(p, base, g.effect, cuts)
             except ModelError:
                 T[i, j] = math.inf
     return T

@@ -287,7 +287,11 @@ class Effect:
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
-        object.__setattr__(self, "form", self.type.get_form(self.form).name)
+        f = self.type.get_form(self.form)
+        object.__setattr__(self, "form", f.name)
+        # looked up on every prediction the diagnosis makes: resolve it once
+        object.__setattr__(self, "_form", f)
+        object.__setattr__(self, "_key", (STAGES.index(f.stage), f.rank, self.type.name))
 
     @property
     def name(self) -> str:
@@ -295,7 +299,12 @@ class Effect:
 
     @property
     def spec_form(self) -> Form:
-        return self.type.get_form(self.form)
+        return self._form
+
+    @property
+    def order(self) -> tuple:
+        """Where the effect sits in the chain: (stage, rank, name)."""
+        return self._key
 
     @property
     def is_default_form(self) -> bool:
@@ -307,7 +316,7 @@ class Effect:
     @property
     def is_null(self) -> bool:
         """True when the effect is switched off (its stage is skipped)."""
-        f = self.spec_form
+        f = self._form
         v = self.params[f.switch]
         if math.isinf(f.null):
             return math.isinf(v)

@@ -37,9 +37,6 @@ from . import kernels
 from .base import STAGES, Effect, Signals
 from .registry import as_effects
 
-_STAGE_INDEX = {s: i for i, s in enumerate(STAGES)}
-
-
 @dataclass(frozen=True)
 class Plan:
     """The switched-on effects of a chain, sorted into their stages (forward order)."""
@@ -53,12 +50,11 @@ class Plan:
 
     @classmethod
     def of(cls, effects: Sequence[Effect]) -> "Plan":
-        on = sorted((e for e in effects if not e.is_null),
-                    key=lambda e: (_STAGE_INDEX[e.spec_form.stage], e.spec_form.rank, e.name))
-        by: dict[str, list] = {s: [] for s in STAGES}
+        on = sorted((e for e in effects if not e.is_null), key=lambda e: e.order)
+        by: list[list] = [[] for _ in STAGES]
         for e in on:
-            by[e.spec_form.stage].append(e)
-        return cls(**{s: tuple(v) for s, v in by.items()})
+            by[e.order[0]].append(e)
+        return cls(*map(tuple, by))
 
     @property
     def empty(self) -> bool:

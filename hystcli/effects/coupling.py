@@ -33,7 +33,7 @@ _INF = math.inf
 
 def _form(name: str, stage: str, rank: int, summary: str) -> Form:
     return Form(name, stage, rank, ("gain",), ("deg/deg",), "gain", 0.0, {"gain": 0.15}, {"gain": (-0.5, 0.5)},
-                {"gain": (-_INF, _INF)}, {"gain": np.linspace(-0.5, 0.5, 41)}, summary)
+                {"gain": (-_INF, _INF)}, {"gain": np.linspace(-0.5, 0.5, 21)}, summary)
 
 
 class Coupling(EffectType):

@@ -27,7 +27,7 @@ class Creep(EffectType):
         Form("relax", "output", 10, ("fraction", "tau"), ("1", "s"), "fraction", 0.0,
              {"fraction": 0.2, "tau": 3.0}, {"fraction": (-0.6, 0.6), "tau": (0.2, 30.0)},
              {"fraction": (-0.95, 1.0), "tau": (1e-9, _INF)},
-             {"fraction": np.linspace(-0.45, 0.6, 15), "tau": np.geomspace(0.3, 30.0, 11)},
+             {"fraction": np.linspace(-0.4, 0.6, 11), "tau": np.geomspace(0.3, 30.0, 9)},
              "a fraction of each tip move arrives (or, negative, is given back) with time constant tau"),
     )
 

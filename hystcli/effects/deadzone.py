@@ -32,10 +32,10 @@ class Deadzone(EffectType):
     regressors = ("curvature", "condition")
     forms = (
         Form("width", "condition", 20, ("width",), ("deg/rad",), "width", 0.0, {"width": 3.0},
-             {"width": (-4.0, 10.0)}, {"width": (-_INF, _INF)}, {"width": np.linspace(-4.0, 10.0, 29)},
+             {"width": (-4.0, 10.0)}, {"width": (-_INF, _INF)}, {"width": np.linspace(-4.0, 10.0, 15)},
              "the dead zone widens by width per rad of curvature"),
         Form("centre", "condition", 20, ("shift",), ("deg/rad",), "shift", 0.0, {"shift": 2.0},
-             {"shift": (-10.0, 10.0)}, {"shift": (-_INF, _INF)}, {"shift": np.linspace(-10.0, 10.0, 41)},
+             {"shift": (-10.0, 10.0)}, {"shift": (-_INF, _INF)}, {"shift": np.linspace(-10.0, 10.0, 21)},
              "the dead zone's centre moves by shift per rad of curvature"),
     )
 

@@ -22,7 +22,7 @@ import numpy as np
 from .base import EffectType, Form
 
 _MU = dict(params=("mu",), units=("1/rad",), switch="mu", null=0.0, typical={"mu": 0.3},
-           bounds={"mu": (0.0, 1.0)}, domain={"mu": (0.0, 5.0)}, axes={"mu": np.linspace(0.0, 1.0, 41)})
+           bounds={"mu": (0.0, 1.0)}, domain={"mu": (0.0, 5.0)}, axes={"mu": np.linspace(0.0, 1.0, 21)})
 
 
 class Friction(EffectType):

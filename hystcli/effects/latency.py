@@ -33,7 +33,7 @@ class Latency(EffectType):
     regressors = ("knob velocity",)
     forms = (
         Form("tracker", "sensor", 0, ("delay",), ("s",), "delay", 0.0, {"delay": 0.1}, {"delay": (0.0, 1.0)},
-             {"delay": (0.0, _INF)}, {"delay": np.linspace(0.0, 1.0, 51)}, "the tracker reports the tip late"),
+             {"delay": (0.0, _INF)}, {"delay": np.linspace(0.0, 1.0, 26)}, "the tracker reports the tip late"),
     )
 
     def new_state(self, eff):

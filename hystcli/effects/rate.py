@@ -34,7 +34,7 @@ _INF = math.inf
 
 def _form(name: str, stage: str, rank: int, summary: str) -> Form:
     return Form(name, stage, rank, ("tau",), ("s",), "tau", 0.0, {"tau": 0.3}, {"tau": (0.0, 2.0)},
-                {"tau": (0.0, _INF)}, {"tau": np.concatenate([[0.0], np.geomspace(0.01, 2.0, 40)])}, summary)
+                {"tau": (0.0, _INF)}, {"tau": np.concatenate([[0.0], np.geomspace(0.01, 2.0, 20)])}, summary)
 
 
 class Rate(EffectType):

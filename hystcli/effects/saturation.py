@@ -23,7 +23,7 @@ import numpy as np
 from .base import EffectType, Form
 
 _INF = math.inf
-_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 40), [math.inf]])
+_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 20), [math.inf]])
 
 
 def _form(name: str, summary: str, **extra) -> Form:
@@ -32,8 +32,8 @@ def _form(name: str, summary: str, **extra) -> Form:
     if extra:
         params, units = params + ("ratio",), units + ("1",)
         typical, bounds, domain = {**typical, "ratio": 1.0}, {**bounds, "ratio": (0.25, 4.0)}, {**domain, "ratio": (1e-3, 1e3)}
-        axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 16), [math.inf]]),
-                "ratio": np.geomspace(0.4, 2.5, 7)}
+        axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 10), [math.inf]]),
+                "ratio": np.geomspace(0.4, 2.5, 5)}
     return Form(name, "output", 0, params, units, "limit", _INF, typical, bounds, domain, axes, summary)
 
 
