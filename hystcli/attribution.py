@@ -4,7 +4,7 @@ Before any effect is fitted, the residual ``e = y - predicted`` of every run is 
 by group, on physical regressors that name a cause without assuming its form:
 
 =====================  ======================================================================
-regressor              columns (each also with a constant)
+regressor              columns (each beside the generic loop terms 1, dir, dir*m, y)
 =====================  ======================================================================
 other knob angle       q_o, q_o*m, q_o*dir          (q_o: the other knob's command)
 other knob magnitude   a, a*m, a*dir                (a = |q_o - offset_o|: its bend's size)
@@ -14,12 +14,13 @@ elapsed time           t - t0, (t - t0)*dir
 curvature              kappa, kappa*dir, kappa*dir*m, kappa*y   (total curvature, rad)
 condition              c, c*dir, c*dir*m, c*y       (the run's stated condition, rad)
 tip angle              y^3, y*|y|                   (y: the predicted tip)
+knob direction         dir, dir*m, y beside a constant alone (a loop-shape error)
 =====================  ======================================================================
 
 with ``dir`` the sign of the knob's last motion and ``m`` 1 where the model's hysteresis output
 moves (the tip follows the knob), 0 on its plateaus. Each group is fitted on the training runs of
 every fold of the diagnosis and scored on the held-out runs: the share of the residual's energy it
-explains beyond a constant offset. The ranking is reported in WHERE, orders the candidate effects
+explains beyond the generic loop terms (what any error of the loop's width, slope or offset leaves). The ranking is reported in WHERE, orders the candidate effects
 (each effect names the regressors its residual follows), and says what is left unexplained.
 """
 from __future__ import annotations
@@ -34,7 +35,7 @@ from . import effects as E
 from .search import Prep
 
 REGRESSORS = ("other knob angle", "other knob magnitude", "knob velocity", "time since reversal",
-              "elapsed time", "curvature", "condition", "tip angle")
+              "elapsed time", "curvature", "condition", "tip angle", "knob direction")
 """The physical regressors, in report order."""
 
 
@@ -72,8 +73,9 @@ def _since_reversal(d: np.ndarray, t: np.ndarray) -> np.ndarray:
     return t - t[start]
 
 
-def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, dict[str, np.ndarray]]:
-    """The residual of knob ``k`` of a prepared run and every regressor group's columns."""
+def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+    """The residual of knob ``k`` of a prepared run, the generic loop terms every group is
+    measured beyond, and every regressor group's columns."""
     tr = p.trace(effects, k) if effects else None
     yp = tr.y if tr is not None else p.knobs[k].forward(p.q[k], float(p.y[k][0]))
     yh = tr.yh if tr is not None and tr.yh is not None else yp
@@ -84,6 +86,10 @@ def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, d
     m = (np.abs(np.gradient(yh, t)) > 1e-6).astype(float) if t.size > 1 else np.zeros_like(t)
     s = _since_reversal(d, t)
     te = t - t[0]
+    one = np.ones_like(t)
+    # what any loop-shape error leaves (an offset, a wider or narrower loop, a slope): a group
+    # earns credit only for what it explains beyond these
+    loop = np.column_stack([one, d, d * m, yp / 50.0])
     groups: dict[str, np.ndarray] = {}
     o = p.q.get(3 - k)
     if o is not None:
@@ -94,16 +100,21 @@ def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, d
     groups["time since reversal"] = np.column_stack([d * np.exp(-s / tau) for tau in (0.5, 2.0, 8.0)])
     groups["elapsed time"] = np.column_stack([te, te * d])
     kappa = math.radians(p.shape.total_curvature)
-    groups["curvature"] = kappa * np.column_stack([np.ones_like(t), d, d * m, yp / 50.0])
+    groups["curvature"] = kappa * loop
     if p.condition is not None:
-        c = math.radians(p.condition)
-        groups["condition"] = c * np.column_stack([np.ones_like(t), d, d * m, yp / 50.0])
+        groups["condition"] = math.radians(p.condition) * loop
     groups["tip angle"] = np.column_stack([(yp / 50.0) ** 3, yp * np.abs(yp) / 2500.0])
-    return e, groups
+    return e, loop, groups
 
 
 def attribute(preps: Sequence[Prep], effects: Sequence[E.Effect], folds, w: np.ndarray) -> tuple[Attribution, ...]:
     """Rank the regressors by the held-out share of the residual they explain (best first).
+
+    Each group is fitted, with the generic loop terms (a constant, the knob direction, the
+    direction where the tip moves, the tip angle), on a fold's training runs and scored on its
+    held-out runs against the loop terms alone: its share of the residual energy explained beyond
+    them. A group that does not vary across the runs is left out (one curvature for every run
+    cannot tell a curvature effect from a loop-shape error).
 
     Parameters
     ----------
@@ -116,44 +127,39 @@ def attribute(preps: Sequence[Prep], effects: Sequence[E.Effect], folds, w: np.n
     w : numpy.ndarray
         Run weights.
     """
-    # per run: energy, and per group the Gram matrix and cross products with a constant column
     energy = np.zeros(len(preps))
-    gram: dict[str, list] = {}
-    cross: dict[str, list] = {}
-    const_g = np.zeros((len(preps), 1, 1))
-    const_c = np.zeros((len(preps), 1))
-    present: set[str] = set()
-    per_run: list[dict] = []
+    stats: dict[str, list] = {}
+    curv = {p.shape.total_curvature for p in preps}
+    conds = {p.condition for p in preps}
     for i, p in enumerate(preps):
-        acc: dict[str, tuple] = {}
         for k in p.knobs:
-            e, groups = columns(p, k, effects)
+            e, loop, groups = columns(p, k, effects)
             energy[i] += float(np.dot(e, e))
-            const_g[i, 0, 0] += e.size
-            const_c[i, 0] += float(e.sum())
+            if len(curv) < 2:
+                groups.pop("curvature", None)
+            if len(conds) < 2:
+                groups.pop("condition", None)
+            groups["knob direction"] = loop[:, 1:]
             for name, X in groups.items():
                 if not np.any(X):
                     continue
-                present.add(name)
-                Xc = np.column_stack([np.ones(e.size), X])
+                base = loop[:, :1] if name == "knob direction" else loop
+                Xc = np.column_stack([base, X])
                 G, c = Xc.T @ Xc, Xc.T @ e
-                if name in acc:
-                    acc[name] = (acc[name][0] + G, acc[name][1] + c)
-                else:
-                    acc[name] = (G, c)
-        per_run.append(acc)
+                per = stats.setdefault(name, [None] * len(preps))
+                per[i] = (G, c, base.shape[1]) if per[i] is None else (per[i][0] + G, per[i][1] + c, base.shape[1])
     out = []
     for name in REGRESSORS:
-        if name not in present:
+        per = stats.get(name)
+        if per is None:
             continue
-        size = 1 + next(a[name][0].shape[0] - 1 for a in per_run if name in a)
+        size = next(x[0].shape[0] for x in per if x is not None)
+        nb = next(x[2] for x in per if x is not None)
         G = np.zeros((len(preps), size, size))
         c = np.zeros((len(preps), size))
-        for i, a in enumerate(per_run):
-            if name in a:
-                G[i], c[i] = a[name]
-            else:
-                G[i, 0, 0], c[i, 0] = const_g[i, 0, 0], const_c[i, 0]
+        for i, x in enumerate(per):
+            if x is not None:
+                G[i], c[i] = x[0], x[1]
         gain = total = 0.0
         for train, test in folds:
             wt = w[train]
@@ -161,16 +167,15 @@ def attribute(preps: Sequence[Prep], effects: Sequence[E.Effect], folds, w: np.n
                 continue
             A = np.tensordot(wt, G[train], axes=1)
             b = wt @ c[train]
-            A0, b0 = np.tensordot(wt, const_g[train], axes=1), wt @ const_c[train]
             beta = _solve(A, b)
-            beta0 = _solve(A0, b0)
+            beta0 = _solve(A[:nb, :nb], b[:nb])
             for i in test:
                 held = energy[i] - 2 * beta @ c[i] + beta @ G[i] @ beta
-                held0 = energy[i] - 2 * beta0 @ const_c[i] + beta0 @ const_g[i] @ beta0
+                held0 = energy[i] - 2 * beta0 @ c[i, :nb] + beta0 @ G[i, :nb, :nb] @ beta0
                 gain += w[i] * (held0 - held)
                 total += w[i] * energy[i]
         if total > 0:
-            out.append(Attribution(name, 100.0 * gain / total))
+            out.append(Attribution(name, float(100.0 * gain / total)))
     return tuple(sorted(out, key=lambda a: -a.explained_pct))
 
 

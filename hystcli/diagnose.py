@@ -856,7 +856,7 @@ def _verdict(rounds: Sequence[Round], selected: Sequence[Selected], how: HowFar,
     lead_left = next((a for a in left if a.explained_pct >= UNEXPLAINED_PCT), None)
     unexplained = ("" if lead_left is None else
                    f" Unexplained: the residual follows {lead_left.regressor} ({lead_left.explained_pct:.0f} % of "
-                   f"what remains, held out), which no candidate's form closes.")
+                   f"what remains, held out); no candidate's form closes it by the {MIN_GAIN_PCT:g} % needed.")
     if not selected:
         if rounds and rounds[0].candidates:
             best = min(rounds[0].candidates, key=lambda c: c.rank)

@@ -22,7 +22,7 @@ class Creep(EffectType):
     name = "creep"
     summary = "viscoelastic creep: a fraction of each tip move arrives with time constant tau"
     driver = "time"
-    regressors = ("time since reversal", "knob velocity")
+    regressors = ("time since reversal", "knob velocity", "knob direction")
     forms = (
         Form("relax", "output", 10, ("fraction", "tau"), ("1", "s"), "fraction", 0.0,
              {"fraction": 0.2, "tau": 3.0}, {"fraction": (-0.6, 0.6), "tau": (0.2, 30.0)},

@@ -29,7 +29,7 @@ class Deadzone(EffectType):
     name = "deadzone"
     summary = "dead zone widens by width * total curvature (rad), split evenly between its edges"
     driver = "shape"
-    regressors = ("curvature", "condition")
+    regressors = ("curvature", "condition", "knob direction")
     forms = (
         Form("width", "condition", 20, ("width",), ("deg/rad",), "width", 0.0, {"width": 3.0},
              {"width": (-4.0, 10.0)}, {"width": (-_INF, _INF)}, {"width": np.linspace(-4.0, 10.0, 15)},

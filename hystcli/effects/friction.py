@@ -29,7 +29,7 @@ class Friction(EffectType):
     name = "friction"
     summary = "capstan friction: backlash x g and slope / g, g = exp(mu * total curvature in rad)"
     driver = "shape"
-    regressors = ("curvature", "condition")
+    regressors = ("curvature", "condition", "knob direction")
     forms = (
         Form("capstan", "condition", 10, summary="backlash x g and slope / g (capstan law)", **_MU),
         Form("backlash", "condition", 10, summary="backlash x g: the knob travels further before the tip turns", **_MU),

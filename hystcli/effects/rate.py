@@ -41,7 +41,7 @@ class Rate(EffectType):
     name = "rate"
     summary = "viscous lag: the knob input follows the command with time constant tau"
     driver = "speed"
-    regressors = ("knob velocity",)
+    regressors = ("knob velocity", "knob direction")
     forms = (
         _form("input", "input", 0, "the knob input lags the command (first order)"),
         _form("input2", "input", 0, "the knob input lags the command (second order)"),
