@@ -457,14 +457,38 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
                 qk = e.type.forward(e, qk, sig, None)
             return qk
 
+        history = []
         for _ in range(max(int(iterations), 1)):
             tail_warn = []
             new = {k: run_steps(k, head[k], cut, len(steps), seen(3 - k, q[3 - k]), tail_warn) for k in use}
             change = max(float(np.max(np.abs(new[k] - q[k]), initial=0.0)) for k in use)
             q = new
+            history.append(q)
             if change < 1e-10:
                 break
+        else:
+            # no fixed point: a stage after the hysteresis reads the other knob, whose commands
+            # jump where the hysteresis inverse jumps (a reversal), so the iteration can cycle
+            # there. Keep the iterate whose forward prediction is closest to the reference.
+            def miss(qs) -> float:
+                ys = predict(Model({k: model.knob(k).with_offset(offs[k]) for k in use}),
+                             _commands_run(run, t, qs), effects=effs)
+                return max(float(np.sqrt(np.mean((ys[k] - run[f"r{k}"]) ** 2))) for k in use)
+
+            errs = [miss(qs) for qs in history]
+            q = history[int(np.argmin(errs))]
+            tail_warn.append(f"the coupling's inverse did not converge (it reads the other knob after the "
+                             f"hysteresis): the commands miss the reference by {min(errs):.3g} deg RMS on the model")
     return Inverse(q, tuple(dict.fromkeys(warnings + tail_warn)))
+
+
+def _commands_run(run, t, q: Mapping[int, np.ndarray]):
+    from ..io import Run
+
+    cols = {"t": t} if t is not None else {}
+    cols.update({f"q{k}": v for k, v in q.items()})
+    meta = {k: v for k, v in run.meta.items() if not k.startswith("offset")}
+    return Run(cols, meta, run.source)
 
 
 def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals) -> np.ndarray:
@@ -474,10 +498,13 @@ def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals) 
         if moves is not None:
             dp = moves[0] if dp is None else dp + moves[0]
             dn = moves[1] if dn is None else dn + moves[1]
+    # the hysteresis starts where the forward chain starts it: behind a straight tip reading
+    # (0 unless an output stage bends the static map, e.g. a coupling that pushes the tip)
+    yh0 = _rest(plan, 0.0, sig)
     if dp is None:
-        return kn.inverse(r, y0=0.0)
+        return kn.inverse(r, y0=yh0)
     out = np.empty_like(r)
     kernels.inverse_edges_kernel(np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
                                  np.ascontiguousarray(dp, dtype=np.float64), np.ascontiguousarray(dn, dtype=np.float64),
-                                 0.0, kn.holding_knob_angle(0.0), out)
+                                 yh0, kn.holding_knob_angle(yh0), out)
     return out

@@ -18,7 +18,10 @@ output2    ... second order
 
 Each lag is the exact solution for an input held linearly between samples (a ramp of speed v is
 trailed by tau*v). The inverse leads the target by the exact inverse lag, the lead limited to
-``max_lead`` deg (a knob cannot move infinitely fast).
+``max_lead`` deg (a knob cannot move infinitely fast). That discrete inverse has a pole near -1
+when tau >> dt: after a jump of its target (the hysteresis inverse jumps across the dead zone at
+every reversal) it rings for some tau; one lag settles, two in cascade (``input2``) ring into the
+lead limit, so its compensation is approximate (better than none by more than half, not exact).
 """
 from __future__ import annotations
 
