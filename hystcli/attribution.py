@@ -6,19 +6,20 @@ by group, on physical regressors that name a cause without assuming its form:
 =====================  ======================================================================
 regressor              columns (each beside the generic loop terms 1, dir, dir*m, y)
 =====================  ======================================================================
-other knob angle       q_o, q_o*m, q_o*dir          (q_o: the other knob's command)
-other knob magnitude   a, a*m, a*dir                (a = |q_o - offset_o|: its bend's size)
+other knob angle       q_o * (1, m, dir, dir*m, side)  (q_o: the other knob's command)
+other knob magnitude   a * (1, m, dir, dir*m, side)    (a = |q_o - offset_o|: its bend's size)
 knob velocity          v, v*m                       (v = dq/dt)
 time since reversal    dir*exp(-s/tau), tau = 0.5, 2, 8 s  (s: time since the knob reversed)
 elapsed time           t - t0, (t - t0)*dir
-curvature              kappa, kappa*dir, kappa*dir*m, kappa*y   (total curvature, rad)
-condition              c, c*dir, c*dir*m, c*y       (the run's stated condition, rad)
+curvature              kappa * (1, dir, dir*m, y, side)  (total curvature, rad)
+condition              c * (1, dir, dir*m, y, side)      (the run's stated condition, rad)
 tip angle              y^3, y*|y|                   (y: the predicted tip)
-knob direction         dir, dir*m, y beside a constant alone (a loop-shape error)
+knob direction         dir, dir*m, y, side beside a constant alone (a loop-shape error)
 =====================  ======================================================================
 
-with ``dir`` the sign of the knob's last motion and ``m`` 1 where the model's hysteresis output
-moves (the tip follows the knob), 0 on its plateaus. Each group is fitted on the training runs of
+with ``dir`` the sign of the knob's last motion, ``m`` 1 where the model's hysteresis output
+moves (the tip follows the knob), 0 on its plateaus, and ``side = sign(y)*m`` (which loaded slope:
+where a wider or narrower dead zone shows). Each group is fitted on the training runs of
 every fold of the diagnosis and scored on the held-out runs: the share of the residual's energy it
 explains beyond the generic loop terms (what any error of the loop's width, slope or offset leaves). The ranking is reported in WHERE, orders the candidate effects
 (each effect names the regressors its residual follows), and says what is left unexplained.
@@ -87,15 +88,16 @@ def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, n
     s = _since_reversal(d, t)
     te = t - t[0]
     one = np.ones_like(t)
-    # what any loop-shape error leaves (an offset, a wider or narrower loop, a slope): a group
+    # what any loop-shape error leaves (an offset, a wider loop, a slope, a dead zone): a group
     # earns credit only for what it explains beyond these
-    loop = np.column_stack([one, d, d * m, yp / 50.0])
+    side = np.sign(yp) * m   # which loaded slope the tip is on: a dead-zone width error
+    loop = np.column_stack([one, d, d * m, yp / 50.0, side])
     groups: dict[str, np.ndarray] = {}
     o = p.q.get(3 - k)
     if o is not None:
         a = np.abs(o - p.offsets.get(3 - k, 0.0))
-        groups["other knob angle"] = np.column_stack([o, o * m, o * d])
-        groups["other knob magnitude"] = np.column_stack([a, a * m, a * d])
+        groups["other knob angle"] = np.column_stack([o, o * m, o * d, o * d * m, o * side])
+        groups["other knob magnitude"] = np.column_stack([a, a * m, a * d, a * d * m, a * side])
     groups["knob velocity"] = np.column_stack([v, v * m])
     groups["time since reversal"] = np.column_stack([d * np.exp(-s / tau) for tau in (0.5, 2.0, 8.0)])
     groups["elapsed time"] = np.column_stack([te, te * d])

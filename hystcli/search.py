@@ -225,14 +225,18 @@ def pick(T: np.ndarray, w: np.ndarray, n: np.ndarray, ks: np.ndarray, acts: np.n
 
     Among the forms of a family the choice is by BIC (n log(SSE/n) + k log n): a form with more
     parameters must earn them. A form is eligible only where at least as many of the weighted runs
-    see it as it has parameters (two runs cannot pin down three parameters of a stiffening cable).
-    Ties (a parameter the runs cannot see) go to the point nearest to off.
+    see it as it has parameters, and a form with more parameters than the family's simplest needs
+    one run more than that (three runs at three loads would pin down the three parameters of a
+    stiffening cable exactly, noise and all). Ties (a parameter the runs cannot see) go to the point
+    nearest to off.
     """
     on = w > 0
     obj = w[on] @ np.where(np.isfinite(T[on]), T[on], 1e300)
     n_w = max(float(w[on] @ n[on]), 1.0)
     seen = acts[on].sum(axis=0)
-    ok = (ks <= np.maximum(seen, 1)) | (ks == 0)
+    k_min = int(ks[ks > 0].min()) if np.any(ks > 0) else 0
+    need = np.where(ks > k_min, ks + 1, ks)
+    ok = (need <= np.maximum(seen, 1)) | (ks == 0)
     crit = np.where(ok & (obj < 1e299), n_w * np.log(np.maximum(obj, 1e-300) / n_w) + ks * math.log(n_w), np.inf)
     j = argmin(crit, null_dist, tol=1e-9 * n_w)
     return j, float(obj[j])
