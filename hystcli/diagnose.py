@@ -785,7 +785,8 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
             best = (math.inf, None)
             for start in (fold_starts[f], chosen):
                 key = tuple((et.name, fm, tuple(sorted(p.items()))) for et, fm, p in start)
-                fitted, sse, shared[key] = S.fit(fit, wt, base, start, iterations=4, res=shared.get(key))
+                fitted, sse, shared[key] = S.fit(fit, wt, base, start, iterations=4, res=shared.get(key),
+                                                  frozen=True)
                 if sse < best[0]:
                     best = (sse, fitted)
             effs = _effects(base, best[1])
