@@ -219,6 +219,58 @@ def acting(preps: Sequence[Prep], etype: EffectType, grid: Sequence[GridPoint]) 
     return np.column_stack([forms[g.form] for g in grid]) if grid else np.zeros((len(preps), 0), bool)
 
 
+_AXES: dict[str, tuple[np.ndarray, np.ndarray, str | None]] = {}
+
+
+def axis_neighbours(etype: EffectType) -> tuple[np.ndarray, np.ndarray, list]:
+    """For each grid point of a family: its neighbours' indices along its form's axis (-1 where the
+    form has more than one axis, at an end, or beside an infinite value) and the axis' value."""
+    got = _AXES.get(etype.name)
+    if got is None:
+        grid = family_grid(etype)
+        lo = np.full(len(grid), -1)
+        hi = np.full(len(grid), -1)
+        names: list = [None] * len(grid)
+        for j, g in enumerate(grid):
+            f = etype.get_form(g.form)
+            if len(f.axes) != 1:
+                continue
+            p = next(iter(f.axes))
+            names[j] = p
+            for d, arr in ((-1, lo), (1, hi)):
+                i = j + d
+                if 0 <= i < len(grid) and grid[i].form == g.form and all(
+                        math.isfinite(grid[x].params[p]) for x in (i, j)):
+                    arr[j] = i
+        got = _AXES[etype.name] = (lo, hi, names)
+    return got
+
+
+def subgrid(obj: np.ndarray, j: int, etype: EffectType) -> tuple[np.ndarray, np.ndarray, float | None]:
+    """Where between its neighbours the minimum at grid point ``j`` lies: the vertex of the parabola
+    through the three objective values along the form's axis. Returns the three indices, the
+    interpolation weights that give any run's SSE there (Lagrange), and the parameter's value
+    (None: no neighbours on both sides, or no interior minimum; then the weights pick ``j``)."""
+    lo, hi, names = axis_neighbours(etype)
+    a, b = int(lo[j]), int(hi[j])
+    idx = np.array([j, j, j])
+    if a < 0 or b < 0 or not all(np.isfinite(obj[[a, j, b]])):
+        return idx, np.array([0.0, 1.0, 0.0]), None
+    grid = family_grid(etype)
+    p = names[j]
+    x0, x1, x2 = (grid[i].params[p] for i in (a, j, b))
+    f0, f1, f2 = obj[a], obj[j], obj[b]
+    den = (x0 - x1) * (x0 - x2) * (x1 - x2)
+    A = (x2 * (f1 - f0) + x1 * (f0 - f2) + x0 * (f2 - f1)) / den
+    B = (x2 * x2 * (f0 - f1) + x1 * x1 * (f2 - f0) + x0 * x0 * (f1 - f2)) / den
+    if not A > 0:
+        return idx, np.array([0.0, 1.0, 0.0]), None
+    x = min(max(-B / (2 * A), x0), x2)
+    wts = np.array([(x - x1) * (x - x2) / ((x0 - x1) * (x0 - x2)), (x - x0) * (x - x2) / ((x1 - x0) * (x1 - x2)),
+                    (x - x0) * (x - x1) / ((x2 - x0) * (x2 - x1))])
+    return np.array([a, j, b]), wts, x
+
+
 def pick(T: np.ndarray, w: np.ndarray, n: np.ndarray, ks: np.ndarray, acts: np.ndarray,
          null_dist: np.ndarray) -> tuple[int, float]:
     """The grid point a fit on the runs weighted ``w`` chooses, and its weighted SSE.
