@@ -50,6 +50,6 @@ class Creep(EffectType):
         if z.size == 0:
             return z
         out = np.empty_like(z)
-        kernels.uncreep_kernel(np.ascontiguousarray(z), t, float(eff["fraction"]), float(eff["tau"]),
-                               np.full(3, np.nan) if state is None else state, out)
+        kernels.partial_unlag_kernel(np.ascontiguousarray(z), t, float(eff["fraction"]), float(eff["tau"]), math.inf,
+                                     np.full(3, np.nan) if state is None else state, out)
         return out

@@ -64,20 +64,23 @@ def _lag_affine(dt, tau, u_prev, z_prev):
 
 
 @njit(cache=True, fastmath=False)
-def unlag_kernel(z_target, t, tau, lead, st, out):
-    """The command u whose first-order lag lands on ``z_target`` (inverse of :func:`lag_kernel`).
+def partial_unlag_kernel(target, t, fraction, tau, lead, st, out):
+    """Inverse of the partial lag ``y = (1 - f) u + f lag(u, tau)``, sample by sample.
 
-    z_i = A u_i + B with 0 < A <= 1, so u_i is unique. A knob cannot move infinitely fast: the
-    lead ``|u - z_target|`` is limited to ``lead`` deg (the lag then catches up over the next
-    samples). ``st`` is ``[u, z, t]`` of the last sample (NaN: at rest on ``z_target[0]``).
+    lag(u)_i = A u_i + B with A = 1 - c, B = c u_{i-1} + e (z_{i-1} - u_{i-1}), c = (1 - e) tau / dt,
+    e = exp(-dt/tau), so u_i = (y_i - f B) / (1 - f + f A): unique, since 1 - f + f A > 0 for
+    f < 1 and A > 0 for f = 1 (a whole lag). The inverse is stable: the map is minimum-phase. A
+    knob cannot move infinitely fast: ``|u - target|`` is limited to ``lead`` deg (inf: no limit;
+    the lag then catches up over the next samples). ``st`` is ``[u, z, t]`` of the last sample
+    (NaN: at rest on ``target[0]``).
     """
-    n = z_target.shape[0]
+    n = target.shape[0]
     if n == 0:
         return
     start = 0
     if math.isnan(st[0]):
-        u_prev = z_target[0]
-        z = z_target[0]
+        u_prev = target[0]
+        z = target[0]
         tp = t[0]
         out[0] = u_prev
         start = 1
@@ -87,45 +90,11 @@ def unlag_kernel(z_target, t, tau, lead, st, out):
         dt = t[i] - tp
         if dt > 0.0:
             a, b = _lag_affine(dt, tau, u_prev, z)
-            u = (z_target[i] - b) / a
-            if u > z_target[i] + lead:
-                u = z_target[i] + lead
-            elif u < z_target[i] - lead:
-                u = z_target[i] - lead
-            z = a * u + b
-        else:
-            u = u_prev
-        out[i] = u
-        u_prev = u
-        tp = t[i]
-    st[0], st[1], st[2] = u_prev, z, tp
-
-
-@njit(cache=True, fastmath=False)
-def uncreep_kernel(y_target, t, fraction, tau, st, out):
-    """Inverse of the partial lag ``y = (1 - f) yh + f lag(yh, tau)``, sample by sample.
-
-    lag(yh)_i = A yh_i + B (see :func:`unlag_kernel`), so yh_i = (y_i - f B) / (1 - f + f A);
-    1 - f + f A > 0 for f < 1, and the inverse is stable (creep is minimum-phase). ``st`` as in
-    :func:`unlag_kernel`.
-    """
-    n = y_target.shape[0]
-    if n == 0:
-        return
-    start = 0
-    if math.isnan(st[0]):
-        u_prev = y_target[0]
-        z = y_target[0]
-        tp = t[0]
-        out[0] = u_prev
-        start = 1
-    else:
-        u_prev, z, tp = st[0], st[1], st[2]
-    for i in range(start, n):
-        dt = t[i] - tp
-        if dt > 0.0:
-            a, b = _lag_affine(dt, tau, u_prev, z)
-            u = (y_target[i] - fraction * b) / (1.0 - fraction + fraction * a)
+            u = (target[i] - fraction * b) / (1.0 - fraction + fraction * a)
+            if u > target[i] + lead:
+                u = target[i] + lead
+            elif u < target[i] - lead:
+                u = target[i] - lead
             z = a * u + b
         else:
             u = u_prev

@@ -77,7 +77,8 @@ class Rate(EffectType):
             state = [np.full(3, np.nan) for _ in range(self.order(eff))]
         for st in state:
             out = np.empty_like(z)
-            kernels.unlag_kernel(np.ascontiguousarray(z), t, float(eff["tau"]), float(options["max_lead"]), st, out)
+            kernels.partial_unlag_kernel(np.ascontiguousarray(z), t, 1.0, float(eff["tau"]), float(options["max_lead"]),
+                                         st, out)
             z = out
         return z
 
