@@ -13,7 +13,7 @@ fights the other processes for them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -46,7 +46,6 @@ class Prep:
     offsets: Mapping[int, float]
     shape: Shape
     condition: float | None
-    cache: dict = field(default_factory=dict, compare=False, repr=False)
 
     @property
     def n(self) -> int:
@@ -308,7 +307,7 @@ def argmin(obj: np.ndarray, null_dist: np.ndarray, tol: float | None = None) -> 
 # --------------------------------------------------------------------------------------------
 # least-squares fits of effect parameters
 # --------------------------------------------------------------------------------------------
-@dataclass
+@dataclass(frozen=True)
 class _Slot:
     i: int            # which free effect
     p: str            # parameter
