@@ -63,7 +63,7 @@ def main() -> None:
               f"{d.how_far.rmse_before:.2f} -> {d.how_far.rmse_after:.2f} deg "
               f"({d.how_far.rmse_shrink_pct:.0f} %), {dt:.1f} s")
     print(f"diagnose of {n_runs} runs ({n_samples} samples) in {total:.1f} s "
-          f"(target < 60 s){' with bootstrap ' + str(args.bootstrap) if args.bootstrap else ''}")
+          f"(target < 30 s on a busy machine){' with bootstrap ' + str(args.bootstrap) if args.bootstrap else ''}")
 
 
 if __name__ == "__main__":

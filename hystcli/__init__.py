@@ -7,6 +7,8 @@ The Python surface (DESIGN.md section 9)::
     k = m.knob(1)                             # -> KnobModel
     y = k.forward(q)                          # numpy in, numpy out
     q = k.inverse(r)
+    pred = m.predict(run)                     # with the model's effects: what `hyst predict` writes
+    cmd = m.compensate(reference).run         # with the model's effects: what `hyst compensate` writes
 """
 from .errors import (DataError, DeviceError, HystError, IdentificationError, LinkError, ModelError,
                      SafetyStop, ShiftDetectionError)

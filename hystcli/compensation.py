@@ -1,11 +1,13 @@
-"""Inverse-model compensation of desired trajectories, and the model's prediction of a run.
+"""Compensation of desired trajectories and the model's prediction of a run, as run files.
 
-``compensate`` turns desired tip angles ``r<k>`` into knob commands ``q<k>`` through the exact
-inverse of each knob's model (DESIGN.md section 3, and of the model's effects when it has some),
-shifted by the offset in effect for the
-trajectory (the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
-Compensation-Only). ``predict`` runs the model forward on a run's commands: the "sim" that the
-evaluation and the diagnosis compare with measurement.
+``compensate`` turns desired tip angles ``r<k>`` into knob commands ``q<k>`` through the inverse
+of the model's chain (DESIGN.md section 3 and the model's effects, :func:`hystcli.effects.inverse`;
+with no effects, exactly each knob's inverse), shifted by the offset in effect for the trajectory
+(the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
+Compensation-Only). ``predict`` runs the chain forward on a run's commands: the "sim" that the
+evaluation and the diagnosis compare with measurement. This module adds what a file needs around
+the chain: which knobs, the metadata, the warnings. :meth:`Model.predict` and
+:meth:`Model.compensate` are these two functions.
 """
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .effects import chain
 from .errors import DataError, ModelError
 from .io import Run
 from .model import Model
@@ -60,7 +63,7 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
 
     Without effects this is the exact inverse of DESIGN.md section 3; with the effects
     ``hyst diagnose`` added to the model, :func:`hystcli.effects.inverse` undoes them stage by
-    stage as well.
+    stage as well (the same call: no effects is the chain with no stage).
 
     Parameters
     ----------
@@ -89,18 +92,10 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     in_effect = {k: v for k, v in model.offsets_for(trajectory.meta).items() if k in knobs}
     offsets = {k: 0.0 for k in knobs} if ignore_shift else in_effect
     new_cols: dict[str, np.ndarray] = {}
-    warnings: list[str] = []
-    with_effects = None
-    if model.effects:
-        from .effects import inverse as inverse_with_effects
-
-        with_effects = inverse_with_effects(model, trajectory, offsets=offsets, knobs=knobs)
-        warnings.extend(with_effects.warnings)
+    inv = chain.inverse(model, trajectory, offsets=offsets, knobs=knobs)
+    warnings: list[str] = list(inv.warnings)
     for k in knobs:
-        if with_effects is not None:
-            q = with_effects.q[k]
-        else:
-            q = model.knob(k).with_offset(offsets[k]).inverse(trajectory[f"r{k}"], y0=0.0)
+        q = inv.q[k]
         new_cols[f"q{k}"] = q
         ident = model.identification.get(k)
         if ident is not None:
@@ -134,17 +129,8 @@ def predict_tip(model: Model, run: Run) -> dict[int, np.ndarray]:
     the run's first measured ``y<k>`` when there is one, else from 0 (DESIGN.md section 3).
     """
     knobs = knobs_of(model, run, "q", "knob command")
-    if model.effects:
-        from .effects import predict as predict_with_effects
-
-        ys = predict_with_effects(model, run)
-        return {k: ys[k] for k in knobs}
-    offsets = model.offsets_for(run.meta)
-    out = {}
-    for k in knobs:
-        y0 = float(run[f"y{k}"][0]) if f"y{k}" in run else 0.0
-        out[k] = model.knob(k).with_offset(offsets[k]).forward(run[f"q{k}"], y0=y0)
-    return out
+    ys = chain.predict(model, run)
+    return {k: ys[k] for k in knobs}
 
 
 def predict(model: Model, run: Run) -> Run:

@@ -12,29 +12,39 @@ WHERE
     the samples, its share of the residual energy ``sum(e**2)`` and its RMSE; the level with the
     largest energy-to-sample ratio is the dominant finding.
 
-WHICH
-    Every effect of :data:`hystcli.effects.EFFECTS` is a candidate (one driven by a stated
-    ``condition``, stretch, only when a run states one). Each candidate's parameters
-    that move the tip (``contact``'s stiffness only moves the current) are searched on a grid over
-    the type's ``bounds``: the SSE of every run at every grid point is one table, so a fit on any
-    set of training runs is a weighted column sum and an argmin (no refit per fold). Whole runs
-    are held out: leave-one-run-out by default, or ``key=value`` (train on the runs whose
-    metadata ``key`` differs, test on the others). Candidates are ranked by the held-out RMSE
-    they reach; a training information criterion (BIC, with AIC beside it) must improve too.
-    Greedy forward selection adds the best candidate while its held-out RMSE shrink is at least
-    :data:`MIN_GAIN_PCT` % of the current held-out RMSE, at most ``max_effects`` effects. In the
-    second and later rounds the effects already chosen keep their all-run fit (a small optimism
-    in the *selection* only; the figures of HOW FAR refit everything per fold).
-    ``bootstrap > 0`` resamples the runs with replacement: the whole selection is repeated for
-    the inclusion frequency of each effect, the chosen set refitted for 95 % intervals.
-    When nothing passes the threshold the report says so and describes the residual that
-    remains (autocorrelation, correlation with knob speed, with the other knob) instead of
-    naming a cause.
+WHICH, before any fit
+    What physical quantity the residual follows, whatever the form of the effect behind it
+    (:mod:`hystcli.attribution`): the other knob's angle and bend, knob velocity, time since a
+    reversal, elapsed time, curvature, the stated condition, the tip angle, each scored by the
+    share of the residual it explains on held-out runs. Reported in WHERE; it orders the
+    candidates, and what it still finds after the chosen effects is named in the verdict
+    ("Unexplained: the residual follows ...").
+
+WHICH, fitted
+    Every effect of :data:`hystcli.effects.EFFECTS` is a candidate family (one driven by a
+    stated ``condition`` only when a run states one). Nothing here knows one effect from another:
+    each family's forms bring their grids, bounds and the runs they act on
+    (:mod:`hystcli.effects.base`), and :mod:`hystcli.search` makes the table of every run's SSE
+    at every grid point of every form, so a fit on any set of training runs is a weighted column
+    sum and a pick (no refit per fold): by BIC among forms, only where enough runs see a form,
+    between the grid's neighbours along a one-parameter form's axis. Whole runs are held out:
+    leave-one-run-out by default, or ``key=value`` (train on the runs whose metadata ``key``
+    differs, test on the others). Families are ranked by the held-out RMSE they reach; a training
+    information criterion (BIC, with AIC beside it) must improve too. Greedy forward selection
+    adds the best family (in the form the all-run fit picks, refined by Gauss-Newton) while its
+    held-out RMSE shrink is at least :data:`MIN_GAIN_PCT` % of the current held-out RMSE, at most
+    ``max_effects`` effects. In the second and later rounds the effects already chosen keep
+    their all-run fit (a small optimism in the *selection* only; the figures of HOW FAR refit
+    everything per fold). ``bootstrap > 0`` resamples the runs with replacement: the whole
+    selection is repeated for the inclusion frequency of each effect, the chosen set refitted for
+    95 % intervals. When nothing passes the threshold the report says so and describes the
+    residual that remains instead of naming a cause.
 
 HOW FAR
-    Per fold, the chosen effects are refitted jointly (a bounded Nelder-Mead simplex from the
-    fold's own grid fit) on the training runs and predict the held-out runs at full rate: held-out RMSE
-    (pooled over samples) and PTPE (mean over run and knob) before and after, shrink in %.
+    Per fold, the chosen effects are refitted jointly on the training runs (bounded Gauss-Newton
+    from the fold's own picks and from the all-run fit, the better training fit kept) and predict
+    the held-out runs at full rate: held-out RMSE (pooled over samples) and PTPE (mean over run
+    and knob) before and after, shrink in %.
 
 Runs at 100 Hz or faster are decimated for the search (to at least 50 Hz); the figures of WHERE and
 HOW FAR use every sample. The search is deterministic; only the bootstrap draws, from ``seed``.
@@ -46,13 +56,18 @@ from dataclasses import dataclass, field, replace
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
+from . import attribution as A
 from . import effects as E
+from . import search as S
 from .compensation import knobs_of
+from .effects.base import EffectType
 from .errors import DataError, ModelError
 from .io import Run
 from .metrics import ptpe as _ptpe
-from .model import EffectSpec, KnobModel, Model, Shape
+from .model import KnobModel, Model
+from .search import DECIMATE_ABOVE_HZ, Prep
 
 MIN_GAIN_PCT = 5.0
 """Smallest held-out RMSE shrink (%) for a candidate to join the model.
@@ -60,10 +75,6 @@ MIN_GAIN_PCT = 5.0
 Sensor noise alone leaves every candidate within about 1 % of the base model on held-out runs
 (the fit finds nothing that generalises); a real effect of the magnitudes a catheter shows gives
 tens of %. 5 % sits between with room on both sides (bench/withheld.py measures both)."""
-
-DECIMATE_ABOVE_HZ = 100.0
-"""Runs sampled at this rate or faster are decimated for the parameter search (to >= half of it:
-50 Hz keeps a 0.02 s resolution of delays and lags, under the 20 Hz filter of the tracker)."""
 
 MOVING_DEG_S = 0.5
 """A knob moves when its speed exceeds this (deg/s)."""
@@ -118,6 +129,8 @@ class Where:
     samples: int
     groups: tuple[Breakdown, ...]
     finding: str
+    follows: tuple[A.Attribution, ...] = ()
+    """What the residual follows: physical regressors ranked by the held-out share they explain."""
 
     def factor(self, name: str) -> tuple[Breakdown, ...]:
         """The levels of one factor."""
@@ -141,6 +154,8 @@ class Candidate:
         Change of the training information criteria against the round's base (< 0: better).
     rank : int
         1 = best held-out RMSE among the candidates whose BIC improves.
+    form : str
+        The family's form the all-run fit chose (the name is the physics, the form how it shows).
     """
 
     name: str
@@ -150,6 +165,7 @@ class Candidate:
     delta_bic: float
     delta_aic: float
     rank: int
+    form: str = ""
 
 
 @dataclass(frozen=True)
@@ -170,6 +186,10 @@ class Selected:
     params: Mapping[str, float]
     interval: Mapping[str, tuple[float, float]] = field(default_factory=dict)
     inclusion: float | None = None
+    form: str = ""
+
+    def effect(self) -> E.Effect:
+        return E.make_effect(self.name, self.form or None, **self.params)
 
 
 @dataclass(frozen=True)
@@ -248,6 +268,8 @@ class Diagnosis:
     verdict: str
     runs: tuple[str, ...] = ()
     bootstrap: int = 0
+    left: tuple[A.Attribution, ...] = ()
+    """What the residual still follows after the chosen effects (held out)."""
 
     @property
     def ranking(self) -> tuple[Candidate, ...]:
@@ -265,6 +287,8 @@ class Diagnosis:
             "where": {
                 "rmse": _r(self.where.rmse), "samples": self.where.samples,
                 "finding": self.where.finding,
+                "follows": [{"regressor": a.regressor, "explained_pct": _r(a.explained_pct, 2)}
+                            for a in self.where.follows],
                 "factors": _factors_dict(self.where.groups),
             },
             "which": {
@@ -272,12 +296,12 @@ class Diagnosis:
                 "rounds": [{
                     "base": list(rd.base), "base_heldout_rmse": _r(rd.base_heldout_rmse),
                     "chosen": rd.chosen,
-                    "candidates": [{"rank": c.rank, "name": c.name, "params": _rd(c.params),
+                    "candidates": [{"rank": c.rank, "name": c.name, "form": c.form, "params": _rd(c.params),
                                     "heldout_rmse": _r(c.heldout_rmse), "gain_pct": _r(c.gain_pct),
                                     "delta_bic": _r(c.delta_bic), "delta_aic": _r(c.delta_aic)}
                                    for c in sorted(rd.candidates, key=lambda c: c.rank)],
                 } for rd in self.rounds],
-                "selected": [{"name": s.name, "params": _rd(s.params),
+                "selected": [{"name": s.name, "form": s.form or s.effect().form, "params": _rd(s.params),
                               "interval95": {p: [_r(a), _r(b)] for p, (a, b) in s.interval.items()},
                               "inclusion": s.inclusion} for s in self.selected],
                 "bootstrap": self.bootstrap,
@@ -299,8 +323,10 @@ class Diagnosis:
                 "corr_other_knob": _r(self.residual.corr_other_knob),
                 "corr_command": _r(self.residual.corr_command),
                 "description": self.residual.description,
+                "follows": [{"regressor": a.regressor, "explained_pct": _r(a.explained_pct, 2)} for a in self.left],
             },
-            "effects": [{"name": e.name, "params": _rd(e.params)} for e in self.model.effects],
+            "effects": [{"name": e.name, **({"form": e.form} if e.form else {}), "params": _rd(e.params)}
+                        for e in self.model.effects],
         }
 
 
@@ -328,228 +354,6 @@ def _shrink(before: float, after: float) -> float:
 
 
 # --------------------------------------------------------------------------------------------
-# prepared runs
-# --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class _Prep:
-    """A run ready for fast repeated prediction: per-knob commands, targets and start states."""
-
-    name: str
-    meta: Mapping[str, str]
-    t: np.ndarray
-    q: Mapping[int, np.ndarray]
-    y: Mapping[int, np.ndarray]
-    knobs: Mapping[int, KnobModel]      # with the run's offset
-    shape: Shape
-    condition: float | None
-
-    @property
-    def n(self) -> int:
-        return sum(v.size for v in self.y.values())
-
-    def predict(self, effects: Sequence[E.Effect]) -> dict[int, np.ndarray]:
-        out = {}
-        for k, kn in self.knobs.items():
-            y0 = float(self.y[k][0])
-            if not effects:
-                out[k] = kn.forward(self.q[k], y0)
-            else:
-                out[k] = E.tip_chain(kn, k, self.q, self.t, effects, self.shape, y0,
-                                     condition=self.condition).y
-        return out
-
-    def residual(self, effects: Sequence[E.Effect]) -> np.ndarray:
-        p = self.predict(effects)
-        return np.concatenate([self.y[k] - p[k] for k in self.knobs])
-
-    def sse(self, effects: Sequence[E.Effect]) -> float:
-        try:
-            e = self.residual(effects)
-        except ModelError:
-            return math.inf  # the effect makes the knob model invalid at this condition
-        return float(e @ e)
-
-
-def _prepare(model: Model, run: Run, name: str, decimate: bool) -> _Prep:
-    t = np.ascontiguousarray(run["t"], dtype=np.float64)
-    step = 1
-    if decimate and t.size > 2:
-        fs = 1.0 / float(np.median(np.diff(t)))
-        if fs >= DECIMATE_ABOVE_HZ * 0.999:
-            step = max(int(fs * 1.001 // (DECIMATE_ABOVE_HZ / 2.0)), 1)
-    sl = slice(None, None, step)
-    offsets = model.offsets_for(run.meta)
-    knobs = [k for k in model.knobs if f"q{k}" in run]
-    q = {k: np.ascontiguousarray(run[f"q{k}"][sl], dtype=np.float64) for k in (1, 2) if f"q{k}" in run}
-    return _Prep(name, run.meta, np.ascontiguousarray(t[sl]), q,
-                 {k: np.ascontiguousarray(run[f"y{k}"][sl], dtype=np.float64) for k in knobs},
-                 {k: model.knob(k).with_offset(offsets[k]) for k in knobs},
-                 Shape.parse(run.meta.get("shape")), E.run_condition(run.meta, name))
-
-
-# --------------------------------------------------------------------------------------------
-# candidates: grids and fits
-# --------------------------------------------------------------------------------------------
-def _fit_params(name: str) -> tuple[str, ...]:
-    # the parameters that move the tip (contact's stiffness only moves the current)
-    return ("wall",) if name == "contact" else E.EFFECTS[name].params
-
-
-def _grid_axes(name: str) -> dict[str, np.ndarray]:
-    et = E.EFFECTS[name]
-    if name == "friction":
-        return {"mu": np.linspace(0.0, 1.0, 41)}
-    if name == "deadzone":
-        return {"width": np.linspace(-4.0, 10.0, 29)}
-    if name == "coupling":
-        return {"gain": np.linspace(-0.5, 0.5, 41)}
-    if name == "rate":
-        return {"tau": np.concatenate([[0.0], np.geomspace(0.01, 2.0, 40)])}
-    if name == "saturation":
-        return {"limit": np.concatenate([np.geomspace(20.0, 400.0, 40), [math.inf]])}
-    if name == "creep":
-        return {"fraction": np.linspace(0.0, 0.6, 9), "tau": np.geomspace(0.2, 30.0, 11)}
-    if name == "contact":
-        return {"wall": np.concatenate([np.arange(-120.0, -1.0, 5.0), np.arange(5.0, 121.0, 5.0), [math.inf]])}
-    if name == "latency":
-        return {"delay": np.linspace(0.0, 1.0, 51)}
-    if name == "stretch":
-        # the offset compliance*(condition - reference) is what the runs see: a coarse reference
-        # grid (15 deg of condition) is enough, the joint simplex refines both
-        return {"compliance": np.linspace(-20.0, 20.0, 41), "reference": np.linspace(-90.0, 180.0, 19)}
-    lo, hi = et.bounds[et.switch]  # pragma: no cover - a new effect type without a tuned grid
-    return {et.switch: np.linspace(lo, hi, 41)}
-
-
-def _param_scale(name: str, p: str) -> float:
-    """Step scale of a parameter for the simplex: its typical value, or a tenth of its fitting
-    range when the typical value is 0 (stretch's reference: 0 for a catheter)."""
-    et = E.EFFECTS[name]
-    if et.typical[p] != 0.0:
-        return max(abs(et.typical[p]), 1e-3)
-    lo, hi = et.bounds[p]
-    return (hi - lo) / 10.0
-
-
-def _grid(name: str) -> list[dict[str, float]]:
-    axes = _grid_axes(name)
-    names = list(axes)
-    mesh = np.meshgrid(*[axes[n] for n in names], indexing="ij")
-    return [{n: float(m.flat[i]) for n, m in zip(names, mesh)} for i in range(mesh[0].size)]
-
-
-def _make(name: str, params: Mapping[str, float]) -> E.Effect:
-    return E.make_effect(name, **params)
-
-
-def _table(preps: Sequence[_Prep], base: Sequence[E.Effect], name: str,
-           grid: Sequence[Mapping[str, float]]) -> np.ndarray:
-    """SSE of every run (rows) at every grid point (columns), with ``base`` effects on."""
-    T = np.empty((len(preps), len(grid)))
-    for j, params in enumerate(grid):
-        effs = tuple(base) + (_make(name, params),)
-        for i, p in enumerate(preps):
-            T[i, j] = p.sse(effs)
-    return T
-
-
-def _ic(sse: float, n: float, p: int) -> tuple[float, float]:
-    n = max(n, 1.0)
-    s = max(sse / n, 1e-300)
-    return n * math.log(s) + p * math.log(n), n * math.log(s) + 2 * p
-
-
-def _refine(preps: Sequence[_Prep], w: np.ndarray, base: Sequence[E.Effect], name: str,
-            grid: Sequence[Mapping[str, float]], j: int) -> tuple[dict[str, float], float]:
-    """Refine one effect's parameters around grid point ``j`` (the grid's neighbours bracket a
-    one-parameter search; two parameters start a bounded simplex there)."""
-    start = {**E.EFFECTS[name].typical, **grid[j]}
-    fitp = [p for p in _fit_params(name) if math.isfinite(start[p])]
-    if len(fitp) != 1:
-        fitted, sse = _fit(preps, w, base, [(name, start)])
-        return fitted[0][1], sse
-    from scipy.optimize import minimize_scalar
-
-    p = fitp[0]
-    axis = _grid_axes(name)[p]
-    axis = axis[np.isfinite(axis)]
-    i = int(np.argmin(np.abs(axis - start[p])))
-    lo_b, hi_b = E.EFFECTS[name].bounds[p]
-    lo = max(axis[max(i - 1, 0)], lo_b)
-    hi = min(axis[min(i + 1, axis.size - 1)], hi_b)
-    if name == "contact" and lo < 0.0 < hi:  # the wall's side is the grid point's side
-        lo, hi = (lo, -1e-6) if start[p] < 0 else (1e-6, hi)
-    obj = lambda v: _wsse(preps, w, tuple(base) + (_make(name, {**start, p: float(v)}),))
-    f0 = obj(start[p])
-    if not hi > lo:
-        return start, f0
-    res = minimize_scalar(obj, bounds=(lo, hi), method="bounded",
-                          options={"xatol": 1e-4 * max(abs(E.EFFECTS[name].typical[p]), 1e-3), "maxiter": 30})
-    if res.fun < f0:
-        return {**start, p: float(res.x)}, float(res.fun)
-    return start, f0
-
-
-def _wsse(preps: Sequence[_Prep], w: np.ndarray, effs: Sequence[E.Effect]) -> float:
-    return float(sum(w[i] * preps[i].sse(effs) for i in range(len(preps)) if w[i] > 0))
-
-
-def _fit(preps: Sequence[_Prep], w: np.ndarray, fixed: Sequence[E.Effect],
-         free: Sequence[tuple[str, Mapping[str, float]]], maxfev: int = 120):
-    """Fit the tip parameters of ``free`` effects jointly (weighted runs), ``fixed`` staying as
-    they are: a bounded Nelder-Mead simplex on parameters scaled by their typical values.
-
-    Returns the fitted ``[(name, params)]`` and the weighted training SSE. A switch parameter at
-    an infinite null (saturation, contact off) is left where it is. Only SSE evaluations, no
-    Jacobian: each costs one prediction per training run.
-    """
-    from scipy.optimize import minimize
-
-    slots = []  # (effect index, param, scale, lo, hi)
-    x0 = []
-    for i, (name, params) in enumerate(free):
-        et = E.EFFECTS[name]
-        for p in _fit_params(name):
-            v = float(params[p])
-            if not math.isfinite(v):
-                continue
-            lo, hi = et.bounds[p]
-            if name == "contact":  # keep the wall on its side (a wall at 0 flips sides)
-                lo, hi = (lo, -1e-6) if v < 0 else (1e-6, hi)
-            scale = _param_scale(name, p)
-            slots.append((i, p, scale, lo, hi))
-            x0.append(min(max(v, lo), hi) / scale)
-
-    def params_at(x):
-        out = [dict(params) for _, params in free]
-        for (i, p, scale, _, _), xv in zip(slots, x):
-            out[i][p] = float(xv) * scale
-        return out
-
-    def obj(x):
-        try:
-            effs = tuple(fixed) + tuple(_make(n, p) for (n, _), p in zip(free, params_at(x)))
-        except ModelError:
-            return math.inf
-        return _wsse(preps, w, effs)
-
-    x0 = np.array(x0)
-    f0 = obj(x0)
-    if not slots:
-        return [(n, dict(p)) for n, p in free], f0
-    bounds = [(s[3] / s[2], s[4] / s[2]) for s in slots]
-    x0 = np.array([min(max(v, lo), hi) for v, (lo, hi) in zip(x0, bounds)])
-    # the simplex starts a few % of each scale away: the grid already put x0 near the minimum
-    simplex = [x0] + [x0 + np.where(np.arange(len(x0)) == k, 0.05 if x0[k] + 0.05 <= bounds[k][1] else -0.05, 0.0)
-                      for k in range(len(x0))]
-    res = minimize(obj, x0, method="Nelder-Mead", bounds=bounds,
-                   options={"initial_simplex": np.array(simplex), "xatol": 1e-4, "fatol": 1e-9 * max(f0, 1e-12),
-                            "maxfev": maxfev})
-    x, f = (res.x, float(res.fun)) if res.fun < f0 else (x0, f0)
-    return [(n, p) for (n, _), p in zip(free, params_at(x))], f
-
-
-# --------------------------------------------------------------------------------------------
 # hold-out
 # --------------------------------------------------------------------------------------------
 def _folds(runs: Sequence[Run], names: Sequence[str], holdout: str | None) -> tuple[list, str]:
@@ -573,105 +377,125 @@ def _folds(runs: Sequence[Run], names: Sequence[str], holdout: str | None) -> tu
 # --------------------------------------------------------------------------------------------
 # the selection
 # --------------------------------------------------------------------------------------------
-def _null_distance(name: str, grid: Sequence[Mapping[str, float]]) -> np.ndarray:
-    """How far each grid point is from switching the effect off (0: off)."""
-    et = E.EFFECTS[name]
-    out = np.zeros(len(grid))
-    for j, g in enumerate(grid):
-        for p, v in g.items():
-            if p != et.switch:
-                continue
-            scale = max(abs(et.typical[p]), 1e-9)
-            if math.isinf(et.null):
-                out[j] += 0.0 if math.isinf(v) else scale / max(abs(v), 1e-12)
-            else:
-                out[j] += abs(v - et.null) / scale
-    return out
+def _ic(sse: float, n: float, p: int) -> tuple[float, float]:
+    n = max(n, 1.0)
+    s = max(sse / n, 1e-300)
+    return n * math.log(s) + p * math.log(n), n * math.log(s) + 2 * p
 
 
-def _argmin(obj: np.ndarray, null_dist: np.ndarray) -> int:
-    """The grid point of least SSE; among equal ones (a parameter the runs cannot see, e.g.
-    coupling without a second knob, friction on a straight shaft) the one nearest to off."""
-    obj = np.where(np.isfinite(obj), obj, np.inf)
-    best = float(np.min(obj))
-    if not math.isfinite(best):
-        return int(np.argmin(null_dist))
-    tie = np.flatnonzero(obj <= best + 1e-9 * abs(best) + 1e-12)
-    return int(tie[np.argmin(null_dist[tie])])
-
-
-def _fold_heldout(T: np.ndarray, w: np.ndarray, folds, null_dist: np.ndarray) -> tuple[float, list[int]]:
-    """Held-out weighted SSE of a table (each fold fits, by argmin, on its training rows) and the
-    grid point each fold chose."""
+def _fold_heldout(T: np.ndarray, w: np.ndarray, folds, n: np.ndarray, ks: np.ndarray, acts: np.ndarray,
+                  null_dist: np.ndarray, etype: EffectType) -> tuple[float, list[tuple[int, float | None]]]:
+    """Held-out weighted SSE of a table and what each fold chose: its grid point (form included,
+    picked on its training rows alone: :func:`hystcli.search.pick`) and, along a one-parameter
+    form's axis, the vertex between the grid's neighbours (:func:`hystcli.search.subgrid`), where
+    the held-out runs' SSE is interpolated: the grid's spacing must not decide between two effects
+    (a friction of 0.055 on a grid of 0.05 steps)."""
     total = 0.0
     picks = []
+    Tf = np.where(np.isfinite(T), T, 1e300)
     for train, test in folds:
-        obj = w[train] @ T[train]
-        j = _argmin(obj, null_dist)
-        picks.append(j)
-        total += float(w[test] @ T[test, j])
+        wt = np.zeros_like(w)
+        wt[train] = w[train]
+        j, _ = S.pick(T, wt, n, ks, acts, null_dist)
+        idx, wts, x = S.subgrid(wt @ Tf, j, etype)
+        picks.append((j, x))
+        total += float(max(w[test] @ (Tf[test][:, idx] @ wts), 0.0))
     return total, picks
 
 
-def _select(preps, w, folds, fixed: Sequence[E.Effect], candidates: Sequence[str], max_effects: int,
-            progress: Callable[[str], None] | None = None):
-    n_eff = float(sum(w[i] * preps[i].n for i in range(len(preps))))
+def _at(etype: EffectType, grid, pick: tuple[int, float | None]) -> tuple[str, dict]:
+    # the form and parameters of a (grid point, sub-grid value) pick
+    j, x = pick
+    params = dict(grid[j].params)
+    if x is not None:
+        params[S.axis_neighbours(etype)[2][j]] = float(x)
+    return grid[j].form, params
+
+
+def _n_fit(etype: EffectType, form: str, params: Mapping[str, float]) -> int:
+    return len([p for p in etype.get_form(form).fit if math.isfinite(params[p])])
+
+
+def _effects(fixed: Sequence[E.Effect], chosen) -> tuple[E.Effect, ...]:
+    return tuple(fixed) + tuple(S.make(et, fm, p) for et, fm, p in chosen)
+
+
+def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[EffectType], max_effects: int,
+            progress: Callable[[str], None] | None = None, tables: dict | None = None):
+    """Greedy forward selection over effect families (each family's forms form one grid).
+
+    ``tables`` caches the first round's SSE tables (they do not depend on the run weights, so the
+    bootstrap's resamples reuse them)."""
+    n_run = np.array([float(p.n) for p in preps])
+    n_eff = float(w @ n_run)
     base_sse = np.array([p.sse(tuple(fixed)) for p in preps])
-    chosen: list[tuple[str, dict]] = []
+    chosen: list[tuple[EffectType, str, dict]] = []
     rounds: list[Round] = []
-    # per fold, where its own training fit put each chosen effect: the start of the HOW FAR
-    # refit, so that a fold never starts from parameters its held-out runs shaped
-    fold_starts: list[list[tuple[str, dict]]] = [[] for _ in folds]
+    # per fold, where its own training fit put each chosen effect (form and parameters): the start
+    # of the HOW FAR refit, so that a fold never starts from parameters its held-out runs shaped
+    fold_starts: list[list[tuple[EffectType, str, dict]]] = [[] for _ in folds]
     n_params = 0
-    for _ in range(max(int(max_effects), 0)):
-        base_effs = tuple(fixed) + tuple(_make(n, p) for n, p in chosen)
+    n_held = sum(float(w[test] @ np.array([preps[i].n for i in test])) for _, test in folds)
+    for rnd in range(max(int(max_effects), 0)):
+        base_effs = _effects(fixed, chosen)
         base_held = sum(float(w[test] @ base_sse[test]) for _, test in folds)
-        n_held = sum(float(w[test] @ np.array([preps[i].n for i in test])) for _, test in folds)
         base_train = float(w @ base_sse)
         bic0, aic0 = _ic(base_train, n_eff, n_params)
+        rmse_b = math.sqrt(base_held / n_held) if n_held > 0 else math.nan
         rows = []
-        for name in candidates:
-            if name in (c for c, _ in chosen):
+        for etype in families:
+            if any(etype is c[0] for c in chosen):
                 continue
             if progress:
-                progress(f"round {len(rounds) + 1}: candidate {name}")
-            grid = _grid(name)
-            T = _table(preps, base_effs, name, grid)
-            nd = _null_distance(name, grid)
-            held, picks = _fold_heldout(T, w, folds, nd)
-            obj = w @ T
-            j = _argmin(obj, nd)
-            params, sse = _refine(preps, w, base_effs, name, grid, j)
-            if not math.isfinite(sse) or sse > obj[j]:
-                params, sse = {**E.EFFECTS[name].typical, **grid[j]}, float(obj[j])
-            k = len([p for p in _fit_params(name) if math.isfinite(params[p])])
-            bic, aic = _ic(sse, n_eff, n_params + k)
+                progress(f"round {rnd + 1}: candidate {etype.name}")
+            grid = S.family_grid(etype)
+            T = tables.get(etype.name) if (tables is not None and rnd == 0) else None
+            if T is None:
+                T = S.table(preps, base_effs, base_sse, etype, grid)
+                if tables is not None and rnd == 0:
+                    tables[etype.name] = T
+            nd = S.null_distance(etype, grid)
+            ks, acts = S.fit_counts(etype, grid), S.acting(preps, etype, grid)
+            held, picks = _fold_heldout(T, w, folds, n_run, ks, acts, nd, etype)
+            j, sse_j = S.pick(T, w, n_run, ks, acts, nd)
+            idx, wts, x = S.subgrid(w @ np.where(np.isfinite(T), T, 1e300), j, etype)
+            if x is not None:
+                sse_j = float(max(w @ (np.where(np.isfinite(T), T, 1e300)[:, idx] @ wts), 0.0))
+            form, params = _at(etype, grid, (j, x))
+            k = _n_fit(etype, form, params)
+            bic, aic = _ic(sse_j, n_eff, n_params + k)
             rmse_h = math.sqrt(held / n_held) if n_held > 0 else math.nan
-            rmse_b = math.sqrt(base_held / n_held) if n_held > 0 else math.nan
-            starts = [{**E.EFFECTS[name].typical, **grid[jf]} for jf in picks]
-            rows.append((name, params, rmse_h, _shrink(rmse_b, rmse_h), bic - bic0, aic - aic0, k, starts))
+            starts = [(etype, *_at(etype, grid, pk)) for pk in picks]
+            rows.append([etype, form, params, rmse_h, _shrink(rmse_b, rmse_h), bic - bic0, aic - aic0, k,
+                         starts, sse_j])
         if not rows:
             break
-        rows.sort(key=lambda r: (r[4] >= 0, r[2]))
-        cands = tuple(Candidate(r[0], r[1], r[2], r[3], r[4], r[5], i + 1) for i, r in enumerate(rows))
+        rows.sort(key=lambda r: (r[5] >= 0, r[3]))
         best = rows[0]
-        ok = best[3] >= MIN_GAIN_PCT and best[4] < 0
-        rmse_b = math.sqrt(base_held / n_held) if n_held > 0 else math.nan
-        rounds.append(Round(tuple(c for c, _ in chosen), rmse_b, cands, best[0] if ok else None))
+        # refine the leader's parameters on all runs (the others keep their grid fit: the ranking
+        # is by held-out RMSE, which the grid already gives)
+        fitted, sse, _ = S.fit(preps, w, base_effs, [(best[0], best[1], best[2])])
+        if math.isfinite(sse) and sse < best[9]:
+            best[2] = dict(fitted[0][2])
+            bic, aic = _ic(sse, n_eff, n_params + best[7])
+            best[5], best[6] = bic - bic0, aic - aic0
+        cands = tuple(Candidate(r[0].name, r[2], r[3], r[4], r[5], r[6], i + 1, r[1]) for i, r in enumerate(rows))
+        ok = best[4] >= MIN_GAIN_PCT and best[5] < 0
+        rounds.append(Round(tuple(S.make(et, fm, p).label() for et, fm, p in chosen), rmse_b, cands,
+                            best[0].name if ok else None))
         if not ok:
             break
-        chosen.append((best[0], dict(best[1])))
-        for f, start in enumerate(best[7]):
-            fold_starts[f].append((best[0], start))
-        n_params += best[6]
+        chosen.append((best[0], best[1], dict(best[2])))
+        for f, start in enumerate(best[8]):
+            fold_starts[f].append(start)
+        n_params += best[7]
         # the chosen effects are refitted jointly on all runs before the next round
         if len(chosen) > 1:
-            chosen, _ = _fit(preps, w, fixed, chosen)
-            chosen = [(n, dict(p)) for n, p in chosen]
-        effs = tuple(fixed) + tuple(_make(n, p) for n, p in chosen)
+            chosen, _, _ = S.fit(preps, w, fixed, chosen)
+            chosen = [(et, fm, dict(p)) for et, fm, p in chosen]
+        effs = _effects(fixed, chosen)
         base_sse = np.array([p.sse(effs) for p in preps])
     return rounds, chosen, fold_starts
-
 
 # --------------------------------------------------------------------------------------------
 # WHERE
@@ -710,7 +534,7 @@ class _Samples:
     other: list = field(default_factory=list)
 
 
-def _collect(preps: Sequence[_Prep], effects: Sequence[E.Effect]) -> _Samples:
+def _collect(preps: Sequence[Prep], effects: Sequence[E.Effect]) -> _Samples:
     s = _Samples()
     factors = ("phase", "direction", "shape", "speed", "amplitude", "other knob", "time", "knob")
     for f in factors:
@@ -723,7 +547,7 @@ def _collect(preps: Sequence[_Prep], effects: Sequence[E.Effect]) -> _Samples:
         for k, kn in p.knobs.items():
             e = p.y[k] - pred[k]
             if effects:
-                tr = E.tip_chain(kn, k, p.q, p.t, effects, p.shape, float(p.y[k][0]), condition=p.condition)
+                tr = p.trace(effects, k)
                 kc, x = tr.knob, tr.x
             else:
                 kc, x = kn, p.q[k]
@@ -809,7 +633,7 @@ def _corr(a: np.ndarray, b: np.ndarray) -> float | None:
     return float(a @ b) / d if d > 0 else 0.0
 
 
-def _residual(preps: Sequence[_Prep], samples: _Samples) -> Residual:
+def _residual(preps: Sequence[Prep], samples: _Samples) -> Residual:
     e = np.concatenate(samples.e)
     rmse = math.sqrt(float(e @ e) / e.size) if e.size else 0.0
     ac_num = ac_den = 0.0
@@ -938,47 +762,73 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     else:
         cands = []
         for c in candidates:
-            c = str(c).strip().lower()
-            if c not in E.EFFECTS:
-                raise ModelError(f"unknown candidate effect {c!r} (known: {', '.join(E.EFFECTS)})")
-            if c not in have and c not in cands:
-                cands.append(c)
+            etype = E.effect_type(c) if str(c).strip().lower() in {*E.EFFECTS, *E.ALIASES} else None
+            if etype is None:
+                raise ModelError(f"unknown candidate effect {str(c).strip().lower()!r} "
+                                 f"(known: {', '.join(E.EFFECTS)})")
+            if etype.name not in have and etype.name not in cands:
+                cands.append(etype.name)
     if int(max_effects) < 0:
         raise DataError("max_effects must be >= 0")
     if int(bootstrap) < 0:
         raise DataError("bootstrap must be >= 0")
     folds, scheme = _folds(runs, names, holdout)
-    fit = [_prepare(model, r, n, decimate=True) for r, n in zip(runs, names)]
-    full = [_prepare(model, r, n, decimate=False) for r, n in zip(runs, names)]
+    with threadpool_limits(limits=1):
+        # one BLAS thread: the work is many small products, and the machine is shared
+        return _diagnose(model, runs, names, base, cands, folds, scheme, int(max_effects), int(bootstrap),
+                         seed, progress)
+
+
+def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, bootstrap, seed, progress):
+    fit = [S.prepare(model, r, n, decimate=True) for r, n in zip(runs, names)]
+    full = [S.prepare(model, r, n, decimate=False) for r, n in zip(runs, names)]
     w = np.ones(len(runs))
 
     if progress:
         progress("where: residual of the model")
     where = _where(_collect(full, base))
-    rounds, chosen, fold_starts = _select(fit, w, folds, base, cands, max_effects, progress)
+    # WHICH, form-agnostic: what the residual follows, before any effect is fitted; it orders
+    # the candidates (an effect whose regressors explain more is tried first)
+    follows = A.attribute(fit, base, folds, w)
+    where = replace(where, follows=follows)
+    families = sorted((E.EFFECTS[n] for n in cands), key=lambda et: -A.score(et, follows))
+    tables: dict = {}
+    rounds, chosen, fold_starts = _select(fit, w, folds, base, families, max_effects, progress, tables)
 
     # HOW FAR: refit the chosen set per fold, predict the held-out runs at full rate
     if progress:
         progress("how far: held-out refits")
     per_run = []
     sse_b = sse_a = n_h = 0.0
+    shared: dict = {}
     for f, (train, test) in enumerate(folds):
         wt = np.zeros(len(runs))
         wt[train] = 1.0
         if chosen:
-            fitted, _ = _fit(fit, wt, base, fold_starts[f], maxfev=200)
-            effs = tuple(base) + tuple(_make(n, p) for n, p in fitted)
+            # two starts, each fitted on the fold's training runs alone, the better kept: the
+            # fold's own grid picks, and the all-run fit (a start only: a coarse grid can put a
+            # small gain on the wrong side of a local minimum the all-run fit has left). Folds that
+            # start from the same point share its residuals and their Jacobian.
+            best = (math.inf, None)
+            for start in (fold_starts[f], chosen):
+                key = tuple((et.name, fm, tuple(sorted(p.items()))) for et, fm, p in start)
+                fitted, sse, shared[key] = S.fit(fit, wt, base, start, iterations=4, res=shared.get(key),
+                                                  frozen=True)
+                if sse < best[0]:
+                    best = (sse, fitted)
+            effs = _effects(base, best[1])
         else:
             effs = tuple(base)
         for i in test:
             before, after = full[i].predict(base), full[i].predict(effs)
             for k in full[i].knobs:
                 eb, ea = full[i].y[k] - before[k], full[i].y[k] - after[k]
-                sse_b += float(eb @ eb)
-                sse_a += float(ea @ ea)
+                sb, sa = float(np.dot(eb, eb)), float(np.dot(ea, ea))
+                sse_b += sb
+                sse_a += sa
                 n_h += eb.size
-                per_run.append(RunFigures(names[i], k, math.sqrt(float(eb @ eb) / eb.size),
-                                          math.sqrt(float(ea @ ea) / ea.size), _ptpe(eb), _ptpe(ea)))
+                per_run.append(RunFigures(names[i], k, math.sqrt(sb / eb.size), math.sqrt(sa / ea.size),
+                                          _ptpe(eb), _ptpe(ea)))
     how = HowFar(math.sqrt(sse_b / n_h), math.sqrt(sse_a / n_h),
                  float(np.mean([f.ptpe_before for f in per_run])),
                  float(np.mean([f.ptpe_after for f in per_run])), tuple(per_run))
@@ -989,8 +839,8 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     if bootstrap > 0:
         rng = np.random.default_rng(seed)
         counts: dict[str, int] = {}
-        draws: list[list[tuple[str, dict]]] = []
-        for b in range(int(bootstrap)):
+        draws: list = []
+        for b in range(bootstrap):
             if progress:
                 progress(f"bootstrap {b + 1}/{bootstrap}")
             # a resample needs a fold with runs on both sides (redrawn otherwise, deterministically)
@@ -999,36 +849,48 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
                 bfolds = [(tr, te) for tr, te in folds if wb[te].sum() > 0 and wb[tr].sum() > 0]
                 if bfolds:
                     break
-            _, bchosen, _ = _select(fit, wb, bfolds, base, cands, max_effects)
-            for n, _ in bchosen:
-                counts[n] = counts.get(n, 0) + 1
+            _, bchosen, _ = _select(fit, wb, bfolds, base, families, max_effects, tables=tables)
+            for et, _, _ in bchosen:
+                counts[et.name] = counts.get(et.name, 0) + 1
             if chosen:
-                fitted, _ = _fit(fit, wb, base, chosen)
+                fitted, _, _ = S.fit(fit, wb, base, chosen)
                 draws.append(fitted)
-        inclusion = {n: counts.get(n, 0) / bootstrap for n in set(counts) | {c for c, _ in chosen}}
-        for j, (n, _) in enumerate(chosen):
-            intervals[n] = {}
-            for p in _fit_params(n):
-                vals = np.array([d[j][1][p] for d in draws], dtype=float)
+        inclusion = {n: counts.get(n, 0) / bootstrap for n in set(counts) | {et.name for et, _, _ in chosen}}
+        for j, (et, fm, _) in enumerate(chosen):
+            intervals[et.name] = {}
+            for p in et.get_form(fm).fit:
+                vals = np.array([d[j][2][p] for d in draws], dtype=float)
                 vals = vals[np.isfinite(vals)]
                 if vals.size:
-                    intervals[n][p] = (float(np.percentile(vals, 2.5)), float(np.percentile(vals, 97.5)))
+                    intervals[et.name][p] = (float(np.percentile(vals, 2.5)), float(np.percentile(vals, 97.5)))
 
-    selected = tuple(Selected(n, dict(p), intervals.get(n, {}), inclusion.get(n) if bootstrap else None)
-                     for n, p in chosen)
-    effs_all = tuple(base) + tuple(_make(n, p) for n, p in chosen)
+    selected = tuple(Selected(et.name, dict(p), intervals.get(et.name, {}),
+                              inclusion.get(et.name) if bootstrap else None, S.make(et, fm, p).spec().form)
+                     for et, fm, p in chosen)
+    effs_all = _effects(base, chosen)
     residual = _residual(full, _collect(full, effs_all))
-    specs = tuple(model.effects) + tuple(_make(n, p).spec() for n, p in chosen)
+    left = A.attribute(fit, effs_all, folds, w) if chosen else follows
+    specs = tuple(model.effects) + tuple(S.make(et, fm, p).spec() for et, fm, p in chosen)
     meta = dict(model.meta)
     if chosen:
-        meta["diagnosed_effects"] = ", ".join(n for n, _ in chosen)
+        meta["diagnosed_effects"] = ", ".join(S.make(et, fm, p).label() for et, fm, p in chosen)
     augmented = replace(model, effects=specs, meta=meta)
-    verdict = _verdict(rounds, selected, how, residual)
+    verdict = _verdict(rounds, selected, how, residual, left)
     return Diagnosis(augmented, where, tuple(rounds), selected, how, residual, scheme, verdict,
-                     tuple(names), int(bootstrap))
+                     tuple(names), int(bootstrap), left)
 
 
-def _verdict(rounds: Sequence[Round], selected: Sequence[Selected], how: HowFar, residual: Residual) -> str:
+UNEXPLAINED_PCT = 10.0
+"""A regressor that still explains this share (%) of the residual, held out, after the chosen
+effects is named: "unexplained: the residual follows ..."."""
+
+
+def _verdict(rounds: Sequence[Round], selected: Sequence[Selected], how: HowFar, residual: Residual,
+             left: Sequence[A.Attribution] = ()) -> str:
+    lead_left = next((a for a in left if a.explained_pct >= UNEXPLAINED_PCT), None)
+    unexplained = ("" if lead_left is None else
+                   f" Unexplained: the residual follows {lead_left.regressor} ({lead_left.explained_pct:.0f} % of "
+                   f"what remains, held out); no candidate's form closes it by the {MIN_GAIN_PCT:g} % needed.")
     if not selected:
         if rounds and rounds[0].candidates:
             best = min(rounds[0].candidates, key=lambda c: c.rank)
@@ -1036,36 +898,46 @@ def _verdict(rounds: Sequence[Round], selected: Sequence[Selected], how: HowFar,
                     f"by {best.gain_pct:.1f} %, below the {MIN_GAIN_PCT:g} % needed.")
         else:
             lead = "No candidate effect was tried."
-        return f"{lead} {residual.description}"
-    eff = " + ".join(f"{s.name}(" + ", ".join(f"{p}={v:.3g}" for p, v in s.params.items()) + ")"
-                     for s in selected)
+        return f"{lead}{unexplained} {residual.description}"
+    eff = " + ".join(f"{s.name}(" + (f"{s.form}: " if s.form else "")
+                     + ", ".join(f"{p}={v:.3g}" for p, v in s.params.items()) + ")" for s in selected)
     return (f"The gap is explained by {eff}: held-out RMSE {how.rmse_before:.2f} -> {how.rmse_after:.2f} deg "
             f"({how.rmse_shrink_pct:.0f} % shrink), PTPE {how.ptpe_before:.2f} -> {how.ptpe_after:.2f} deg "
-            f"({how.ptpe_shrink_pct:.0f} % shrink).")
+            f"({how.ptpe_shrink_pct:.0f} % shrink).{unexplained}")
 
 
 # --------------------------------------------------------------------------------------------
 # the figure
 # --------------------------------------------------------------------------------------------
 def diagnosis_figure(diag: Diagnosis, runs: Sequence[Run]) -> bytes:
-    """PNG bytes: WHERE (energy vs sample share per factor) and the held-out run the effects
-    improve most, measured beside the model before and after."""
+    """PNG bytes: WHERE (energy vs sample share per factor, %), what the residual follows (held-out
+    %), and the held-out run the effects improve most, measured beside the model before and after
+    (deg against s). matplotlib's Figure API: no global backend is switched."""
     import io as _io
+    import textwrap
 
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(2, 2, figsize=(12, 8))
-    for ax, factor in zip(axes.flat[:3], ("phase", "speed", "time")):
+    fig = Figure(figsize=(12, 8.5))
+    axes = fig.subplots(2, 2)
+    for ax, factor in zip(axes.flat[:2], ("phase", "speed")):
         gs = diag.where.factor(factor)
         x = np.arange(len(gs))
-        ax.bar(x - 0.2, [100 * g.sample_share for g in gs], 0.4, label="samples %")
-        ax.bar(x + 0.2, [100 * g.energy_share for g in gs], 0.4, label="residual energy %")
+        ax.bar(x - 0.2, [100 * g.sample_share for g in gs], 0.4, label="samples")
+        ax.bar(x + 0.2, [100 * g.energy_share for g in gs], 0.4, label="residual energy")
         ax.set_xticks(x, [g.level for g in gs], rotation=20, fontsize=8)
-        ax.set_title(f"residual by {factor}")
+        ax.set_ylabel("share (%)")
+        ax.set_title(f"residual by {factor}", fontsize=10)
         ax.legend(fontsize=8)
+    ax = axes.flat[2]
+    follows = list(diag.where.follows)
+    if follows:
+        y = np.arange(len(follows))
+        ax.barh(y, [max(a.explained_pct, 0.0) for a in follows], color="tab:green")
+        ax.set_yticks(y, [a.regressor for a in follows], fontsize=8)
+        ax.invert_yaxis()
+    ax.set_xlabel("residual energy explained, held out (%)")
+    ax.set_title("what the base model's residual follows", fontsize=10)
     ax = axes.flat[3]
     if diag.how_far.per_run:
         best = max(diag.how_far.per_run, key=lambda f: f.rmse_before - f.rmse_after)
@@ -1076,15 +948,17 @@ def diagnosis_figure(diag: Diagnosis, runs: Sequence[Run]) -> bytes:
         after = E.predict(diag.model, run)[best.knob]
         t = run.t
         ax.plot(t, run[f"y{best.knob}"], "k", lw=1, label="measured")
-        ax.plot(t, before, lw=1, label=f"model (RMSE {best.rmse_before:.2f})")
-        ax.plot(t, after, lw=1, label=f"+ effects (RMSE {best.rmse_after:.2f})")
-        ax.set_xlabel("t (s)")
+        ax.plot(t, before, lw=1, label=f"model (RMSE {best.rmse_before:.2f} deg)")
+        ax.plot(t, after, lw=1, label=f"+ effects (RMSE {best.rmse_after:.2f} deg)")
+        ax.set_xlabel("time t (s)")
         ax.set_ylabel(f"tip angle y{best.knob} (deg)")
-        ax.set_title(f"{best.run}" if len(best.run) < 50 else "..." + best.run[-47:], fontsize=9)
+        name = best.run if len(best.run) < 50 else "..." + best.run[-47:]
+        ax.set_title(f"held out: {name}", fontsize=9)
         ax.legend(fontsize=8)
-    fig.suptitle(diag.verdict[:140] + ("..." if len(diag.verdict) > 140 else ""), fontsize=9)
-    fig.tight_layout()
+    # the verdict, wrapped to the figure's width (a long one is cut after three lines)
+    lines = textwrap.wrap(diag.verdict, 150)
+    fig.suptitle("\n".join(lines[:3]) + (" ..." if len(lines) > 3 else ""), fontsize=9)
+    fig.tight_layout(rect=(0, 0, 1, 0.93))
     buf = _io.BytesIO()
     fig.savefig(buf, format="png", dpi=100)
-    plt.close(fig)
     return buf.getvalue()

@@ -52,6 +52,7 @@ from types import MappingProxyType
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+from threadpoolctl import threadpool_limits
 
 from . import metrics
 from .calibration import calibrated_catheter
@@ -638,6 +639,14 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     IdentificationError, ShiftDetectionError
         When a recording cannot identify a model or show an edge.
     """
+    # one BLAS thread: the protocol's linear algebra is many small products, where a threaded
+    # BLAS spends its time waking (and, on a shared 2-core machine, fighting for) threads
+    with threadpool_limits(limits=1):
+        return _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, duration_scale, diagnose)
+
+
+def _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, duration_scale,
+                  diagnose) -> ExperimentResult:
     if int(trials) < 1:
         raise DataError(f"trials must be at least 1, got {trials}")
     if not catheters:

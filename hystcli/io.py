@@ -383,8 +383,11 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
         params = e.get("params") or {}
         if not isinstance(params, dict):
             raise ModelError(f"{source}: effect {e['name']!r}: \"params\" must be an object")
+        form = e.get("form") or ""
+        if not isinstance(form, str):
+            raise ModelError(f"{source}: effect {e['name']!r}: \"form\" must be a string")
         effects.append(EffectSpec(e["name"], {k: _num(v, f"effect {e['name']} parameter {k}")
-                                              for k, v in params.items()}))
+                                              for k, v in params.items()}, form))
     meta = data.get("meta") or {}
     if not isinstance(meta, dict):
         raise ModelError(f"{source}: \"meta\" must be an object")
@@ -416,7 +419,8 @@ def model_to_dict(model: Model) -> dict:
         out["geometry"] = {"beta_catheter_mm": model.geometry.beta_catheter_mm,
                            "beta_knob_mm": model.geometry.beta_knob_mm}
     if model.effects:
-        out["effects"] = [{"name": e.name, "params": dict(e.params)} for e in model.effects]
+        out["effects"] = [{"name": e.name, **({"form": e.form} if e.form else {}), "params": dict(e.params)}
+                          for e in model.effects]
     if model.meta:
         out["meta"] = dict(model.meta)
     if model.identification:

@@ -159,16 +159,24 @@ class KnobModel:
                 f"(d_neg = {self.d_neg:g} > dhat_neg = {self.dhat_neg:g})"
             )
         # Both envelopes are piecewise linear with equal outer slopes, so f_up <= f_dn everywhere
-        # exactly when it holds at the four breakpoints.
-        us = np.array([self.dhat_pos, self.d_pos, self.d_neg, self.dhat_neg])
-        gap = self.f_dn(us) - self.f_up(us)
-        if np.min(gap) < -_TOL * max(1.0, float(np.max(np.abs(us)))):
-            worst = us[int(np.argmin(gap))]
+        # exactly when it holds at the four breakpoints (scalar arithmetic: a model is built for
+        # every condition the diagnosis tries, and numpy's per-call cost dominated it)
+        us = (self.dhat_pos, self.d_pos, self.d_neg, self.dhat_neg)
+        gaps = [self._gap(u) for u in us]
+        worst_gap = min(gaps)
+        if worst_gap < -_TOL * max(1.0, max(abs(u) for u in us)):
+            worst = us[gaps.index(worst_gap)]
             raise ModelError(
                 "invalid model: f_up <= f_dn everywhere is violated "
-                f"(the ascending envelope passes the descending one by {-np.min(gap):.3g} deg "
+                f"(the ascending envelope passes the descending one by {-worst_gap:.3g} deg "
                 f"at u = {worst:g})"
             )
+
+    def _gap(self, u: float) -> float:
+        # f_dn(u) - f_up(u) for one u, as f_dn and f_up compute it
+        up = self.h_pos + self.omega * (min(u - self.dhat_pos, 0.0) + max(u - self.d_pos, 0.0))
+        dn = self.h_neg + self.omega * (min(u - self.d_neg, 0.0) + max(u - self.dhat_neg, 0.0))
+        return dn - up
 
     # -- derived parameters -------------------------------------------------------------------
     @property
@@ -421,10 +429,12 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EffectSpec:
-    """An unmodelled effect attached to a model (DESIGN.md section 8): its name and parameters."""
+    """An unmodelled effect attached to a model (DESIGN.md section 8): its name, parameters and
+    form ("" for the effect's default form, which is what a version 1 entry without one means)."""
 
     name: str
     params: Mapping[str, float] = field(default_factory=dict)
+    form: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "params", MappingProxyType(dict(self.params)))
@@ -549,6 +559,26 @@ class Model:
         if 2 in self.knobs:
             offs[2] = n2
         return self.with_offsets(offs)
+
+    def predict(self, run) -> "object":
+        """The run with ``y<k>`` replaced by what the model and its effects predict for its
+        commands (a measured ``y<k>`` kept as ``y<k>_measured``): what ``hyst predict`` writes.
+
+        Returns a :class:`hystcli.io.Run` (see :func:`hystcli.compensation.predict`).
+        """
+        from .compensation import predict
+
+        return predict(self, run)
+
+    def compensate(self, reference, ignore_shift: bool = False) -> "object":
+        """Knob commands that make the model and its effects follow ``reference``'s ``r<k>``:
+        what ``hyst compensate`` writes, with its warnings.
+
+        Returns a :class:`hystcli.compensation.Compensation` (its ``run`` is the file).
+        """
+        from .compensation import compensate
+
+        return compensate(self, reference, ignore_shift=ignore_shift)
 
     def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
         """Which offset each knob uses for a run with metadata ``meta`` (DESIGN.md section 6).

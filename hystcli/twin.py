@@ -292,7 +292,9 @@ def _knob_signals(catheter: VirtualCatheter, knobs: Mapping[int, KnobModel], q: 
                 chain[k].y = float(ys[k][-1])
             cs[k] = motor_current(knob, catheter.current, q[k], t, state=cstate)
             continue
-        tr = tip_chain(knob, k, q, t, effects, shape, 0.0, None if chain is None else chain[k])
+        other = knobs.get(3 - k)
+        tr = tip_chain(knob, k, q, t, effects, shape, 0.0, None if chain is None else chain[k],
+                       other_offset=0.0 if other is None else other.offset)
         ys[k] = tr.y
         cs[k] = motor_current(tr.knob, catheter.current, q[k], t, x=tr.x, state=cstate) \
             + contact_current(tr, effects)

@@ -9,8 +9,7 @@ from typing import Annotated, List, Optional
 import typer
 
 from .. import io
-from .app import (FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, echo_json, info,
-                  stderr_is_tty)
+from .app import FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, echo_json, info
 
 
 @command("diagnose", epilog="Example: hyst diagnose --model model.json runs/*.csv -o report.json "
@@ -57,7 +56,7 @@ def diagnose_cmd(
         cands = [c.strip() for c in candidates.split(",") if c.strip()]
         if not cands:
             raise typer.BadParameter("give at least one effect name", param_hint="--candidates")
-    progress = (lambda msg: info(f"  {msg}")) if (stderr_is_tty() and not quiet) else None
+    progress = None if quiet else _progress_lines()
     diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
                     bootstrap=bootstrap, seed=seed, progress=progress)
     report = diag.report()
@@ -82,9 +81,28 @@ def diagnose_cmd(
             info(f"wrote {path}")
 
 
+def _progress_lines():
+    """Progress as plain lines on stderr, whether it is a terminal or a file (a piped bootstrap
+    shows where it is), each with the seconds since the start. Kept here until the shared progress
+    helper of ``cli/app.py`` lands."""
+    import time
+
+    t0 = time.monotonic()
+    return lambda msg: info(f"  [{time.monotonic() - t0:5.1f} s] {msg}")
+
+
+def _num(v, width: int, digits: int) -> str:
+    # a figure the report holds as null (not finite: a candidate that breaks a held-out run) as "-"
+    return f"{v:{width}.{digits}f}" if v is not None else f"{'-':>{width}s}"
+
+
 def render_table(report: dict) -> str:
     """The report as text: the finding, the candidate ranking, the figures."""
     lines = ["WHERE", f"  {report['where']['finding']}"]
+    follows = [a for a in report["where"].get("follows", []) if (a["explained_pct"] or 0) >= 1.0]
+    if follows:
+        lines.append("  the residual follows (share of its energy explained on held-out runs): "
+                     + ", ".join(f"{a['regressor']} {a['explained_pct']:.0f} %" for a in follows))
     phase = report["where"]["factors"].get("phase", [])
     if phase:
         lines.append("  " + "  ".join(f"{g['level']}: {100 * g['energy_share']:.0f} % of energy in "
@@ -96,19 +114,20 @@ def render_table(report: dict) -> str:
         base = " + ".join(rd["base"]) or "base model"
         lines.append(f"  round {i}: over {base} (held-out RMSE {rd['base_heldout_rmse']:.3f} deg)"
                      + (f" -> add {rd['chosen']}" if rd["chosen"] else " -> nothing added"))
-        lines.append(f"    {'rank':>4s}  {'effect':11s} {'held-out RMSE':>13s} {'shrink %':>9s} {'dBIC':>12s}  params")
+        lines.append(f"    {'rank':>4s}  {'effect':11s} {'form':18s} {'held-out RMSE':>13s} {'shrink %':>9s} "
+                     f"{'dBIC':>12s}  params")
         for c in rd["candidates"]:
             params = ", ".join(f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in c["params"].items())
             bic = f"{c['delta_bic']:.1f}" if c["delta_bic"] is not None else "-"
-            lines.append(f"    {c['rank']:4d}  {c['name']:11s} {c['heldout_rmse']:13.3f} {c['gain_pct']:9.1f} "
-                         f"{bic:>12s}  {params}")
+            lines.append(f"    {c['rank']:4d}  {c['name']:11s} {c.get('form', ''):18s} {_num(c['heldout_rmse'], 13, 3)} "
+                         f"{_num(c['gain_pct'], 9, 1)} {bic:>12s}  {params}")
     for s in which["selected"]:
         extra = ""
         if s["interval95"]:
             extra += " 95 % " + ", ".join(f"{p}=[{a:.4g}, {b:.4g}]" for p, (a, b) in s["interval95"].items())
         if s["inclusion"] is not None:
             extra += f" inclusion {100 * s['inclusion']:.0f} %"
-        lines.append(f"  added {s['name']}(" + ", ".join(
+        lines.append(f"  added {s['name']}[{s['form']}](" + ", ".join(
             f"{k}={v:.4g}" if isinstance(v, float) else f"{k}={v}" for k, v in s["params"].items()) + ")" + extra)
     hf = report["how_far"]
     lines += ["", "HOW FAR (held-out runs)",

@@ -1,0 +1,66 @@
+"""``latency``: the tracker reports the tip late by a fixed delay.
+
+``y_reported(t) = y(t - delay)`` by linear interpolation; before the first sample the tip sat
+where it started. Compensation aims at the reference ``delay`` seconds ahead (a trajectory file
+is known in advance; the last value is held at the end). A streaming compensator has no future
+samples: it needs ``delay`` seconds of preview of the reference, or it leaves the delay in.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from .base import EffectType, Form
+
+_INF = math.inf
+
+
+@dataclass
+class DelayState:
+    """The tracker's history within ``delay`` (times, tips) and the tip before the first sample."""
+
+    t: np.ndarray | None = None
+    y: np.ndarray | None = None
+    y0: float | None = None
+
+
+class Latency(EffectType):
+    name = "latency"
+    summary = "the tracker reports the tip late by delay seconds"
+    driver = "time"
+    regressors = ("knob velocity",)
+    forms = (
+        Form("tracker", "sensor", 0, ("delay",), ("s",), "delay", 0.0, {"delay": 0.1}, {"delay": (0.0, 1.0)},
+             {"delay": (0.0, _INF)}, {"delay": np.linspace(0.0, 1.0, 26)}, "the tracker reports the tip late"),
+    )
+
+    def new_state(self, eff):
+        return DelayState()
+
+    def forward(self, eff, z, sig, state):
+        t = sig.need_t(self.name)
+        delay = eff["delay"]
+        # y(t - delay) by linear interpolation; before the first sample the tip sat at y0
+        if state is None or state.t is None:
+            T, Y = t, z
+            before = sig.y0
+        else:
+            T, Y = np.concatenate([state.t, t]), np.concatenate([state.y, z])
+            before = state.y0
+        out = np.interp(t - delay, T, Y, left=before)
+        if state is not None and t.size:
+            keep = T >= t[-1] - delay
+            # one sample before the window is the left end of the first interpolation interval
+            first = max(int(np.argmax(keep)) - 1, 0) if keep.any() else T.size - 1
+            state.t, state.y = T[first:].copy(), Y[first:].copy()
+            if state.y0 is None:
+                state.y0 = before
+        return out
+
+    def inverse(self, eff, z, sig, state, warnings, options):
+        t = sig.need_t(self.name)
+        if z.size == 0:
+            return z
+        return np.interp(t + eff["delay"], t, z)

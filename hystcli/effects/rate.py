@@ -1,0 +1,86 @@
+"""``rate`` (a lag): viscous friction makes the tip lag the knob, more the faster it turns.
+
+A pure delay on the input equals one on the output for the rate-independent hysteresis, so a lag
+is a low-pass, not a delay: it also rounds the tip's response to fast command changes (the jumps
+a compensator makes), which ``latency`` does not. Forms, each with time constant tau (s):
+
+=========  ==================================================================  =========
+form       where                                                                stage
+=========  ==================================================================  =========
+input      the knob input x follows the command through a first-order lag       input
+           (the tendon in its sheath; default)
+input2     ... through two such lags in cascade (second order, critically
+           damped: the motor-tendon pair)
+output     the tip follows the hysteresis output through a first-order lag      output
+           (a viscous bending section)
+output2    ... second order
+=========  ==================================================================  =========
+
+Each lag is the exact solution for an input held linearly between samples (a ramp of speed v is
+trailed by tau*v). The inverse leads the target by the exact inverse lag, the lead limited to
+``max_lead`` deg (a knob cannot move infinitely fast). That discrete inverse has a pole near -1
+when tau >> dt: after a jump of its target (the hysteresis inverse jumps across the dead zone at
+every reversal) it rings for some tau; one lag settles, two in cascade (``input2``) ring into the
+lead limit, so its compensation is approximate (better than none by more than half, not exact).
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import kernels
+from .base import EffectType, Form
+
+_INF = math.inf
+
+
+def _form(name: str, stage: str, rank: int, summary: str) -> Form:
+    return Form(name, stage, rank, ("tau",), ("s",), "tau", 0.0, {"tau": 0.3}, {"tau": (0.0, 2.0)},
+                {"tau": (0.0, _INF)}, {"tau": np.concatenate([[0.0], np.geomspace(0.01, 2.0, 20)])}, summary)
+
+
+class Rate(EffectType):
+    name = "rate"
+    summary = "viscous lag: the knob input follows the command with time constant tau"
+    driver = "speed"
+    regressors = ("knob velocity", "knob direction")
+    forms = (
+        _form("input", "input", 0, "the knob input lags the command (first order)"),
+        _form("input2", "input", 0, "the knob input lags the command (second order)"),
+        _form("output", "output", 20, "the tip lags the hysteresis output (first order)"),
+        _form("output2", "output", 20, "the tip lags the hysteresis output (second order)"),
+    )
+
+    @staticmethod
+    def order(eff) -> int:
+        return 2 if eff.form.endswith("2") else 1
+
+    def new_state(self, eff):
+        return [kernels.new_lag_state() for _ in range(self.order(eff))]
+
+    def forward(self, eff, z, sig, state):
+        t = sig.need_t(self.name)
+        if state is None:
+            state = self.new_state(eff)
+        for st in state:
+            out = np.empty_like(z)
+            kernels.lag_kernel(np.ascontiguousarray(z), t, float(eff["tau"]), st, out)
+            z = out
+        return z
+
+    def inverse(self, eff, z, sig, state, warnings, options):
+        t = sig.need_t(self.name)
+        if z.size == 0:
+            return z
+        if state is None:
+            state = [np.full(3, np.nan) for _ in range(self.order(eff))]
+        for st in state:
+            out = np.empty_like(z)
+            kernels.partial_unlag_kernel(np.ascontiguousarray(z), t, 1.0, float(eff["tau"]), float(options["max_lead"]),
+                                         st, out)
+            z = out
+        return z
+
+    def new_inverse_state(self, eff):
+        return [np.full(3, np.nan) for _ in range(self.order(eff))]

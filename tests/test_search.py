@@ -1,0 +1,63 @@
+"""The diagnosis' search engine (hystcli/search.py): the stage-cached SSE table equals a prediction
+per grid point, the form choice needs its runs, fits recover parameters and keep a wall's side."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from hystcli import effects as E
+from hystcli import search as S
+from test_diagnose import BASE, make_runs
+
+RUNS = make_runs([E.make_effect("creep", fraction=0.2, tau=2.0)], seed=5, two_dof=2)
+PREPS = [S.prepare(BASE, r, f"r{i}", True) for i, r in enumerate(RUNS)]
+
+
+@pytest.mark.parametrize("family", sorted(E.EFFECTS))
+@pytest.mark.parametrize("base", [(), (E.make_effect("creep", fraction=0.2, tau=2.0), E.make_effect("rate", tau=0.05))])
+def test_the_table_is_a_prediction_per_grid_point(family, base):
+    etype = E.EFFECTS[family]
+    grid = S.family_grid(etype)[::7]
+    base_sse = np.array([p.sse(base) for p in PREPS])
+    T = S.table(PREPS, base, base_sse, etype, grid)
+    for j, g in enumerate(grid):
+        for i, p in enumerate(PREPS):
+            want = p.sse(base + (g.effect,)) if g.effect is not None else math.inf
+            assert T[i, j] == pytest.approx(want, rel=1e-9, abs=1e-9), (g, i)
+
+
+def test_a_form_with_more_parameters_needs_more_runs():
+    etype = E.EFFECTS["stretch"]
+    grid = S.family_grid(etype)
+    ks = S.fit_counts(etype, grid)
+    acts = np.ones((3, len(grid)), bool)
+    nd = S.null_distance(etype, grid)
+    T = np.ones((3, len(grid)))
+    stiff = [j for j, g in enumerate(grid) if g.form == "stiffening" and ks[j] == 3]
+    T[:, stiff[0]] = 0.5  # the stiffening form fits best
+    n = np.full(3, 100.0)
+    j, _ = S.pick(T, np.array([1.0, 1.0, 1.0]), n, ks, acts, nd)
+    assert grid[j].form == "linear"   # three runs: not enough for three parameters and a spare
+    j, _ = S.pick(np.vstack([T, T[:1]]), np.ones(4), np.full(4, 100.0), ks, np.ones((4, len(grid)), bool), nd)
+    assert j == stiff[0]
+
+
+def test_fit_recovers_a_parameter_and_is_never_worse_than_its_start():
+    truth = E.make_effect("latency", delay=0.2)
+    runs = make_runs([truth], seed=6)
+    preps = [S.prepare(BASE, r, f"r{i}", True) for i, r in enumerate(runs)]
+    w = np.ones(len(preps))
+    start = [(E.EFFECTS["latency"], "tracker", {"delay": 0.12})]
+    fitted, sse, _ = S.fit(preps, w, (), start)
+    assert abs(fitted[0][2]["delay"] - 0.2) < 0.01
+    assert sse <= S.wsse(preps, w, (E.make_effect("latency", delay=0.12),))
+
+
+def test_a_wall_keeps_its_side():
+    f = E.EFFECTS["contact"].get_form("wall")
+    assert S.side_bounds(f, "wall", 5.0) == (1e-6, 120.0)
+    assert S.side_bounds(f, "wall", -5.0) == (-120.0, -1e-6)
+    g = E.EFFECTS["coupling"].get_form("input")
+    assert S.side_bounds(g, "gain", 0.05) == (-0.5, 0.5)  # its grid holds 0: free to cross
