@@ -7,7 +7,6 @@ current are not delayed; live we can only filter causally.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from .errors import DataError
 
@@ -19,6 +18,7 @@ def butter_sos(fs: float, cutoff: float = PAPER_CUTOFF_HZ, order: int = PAPER_OR
     """Second-order sections of the Butterworth low-pass (cutoff in Hz, sample rate ``fs``)."""
     if not fs > 0:
         raise DataError(f"sample rate must be positive, got {fs}")
+    from scipy import signal  # here: scipy.signal takes longer to import than the whole CLI may
     nyq = 0.5 * fs
     if cutoff >= nyq:
         # Sampled too slowly for the filter to do anything: the signal is already band-limited.
@@ -43,6 +43,8 @@ def lowpass(x: np.ndarray, fs: float, cutoff: float = PAPER_CUTOFF_HZ, order: in
     zero_phase : bool
         Forward-backward filtering (offline) when True, causal (live) when False.
     """
+    from scipy import signal
+
     x = np.asarray(x, dtype=float)
     sos = butter_sos(fs, cutoff, order)
     if zero_phase:

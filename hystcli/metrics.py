@@ -682,6 +682,33 @@ def _latex_long(table: Table, digits: int) -> str:
 FORMATS = ("table", "json", "csv", "markdown", "latex")
 
 
+def format_table(table: Table, fmt: str = "table", digits: int = 2) -> str:
+    """Any :class:`Table` as text in ``fmt`` (one of :data:`FORMATS`).
+
+    JSON is ``{"columns": [...], "rows": [{column: value}], "notes": [...]}`` at full precision;
+    the other formats are those of the evaluation tables (``latex`` as one long tabular).
+    """
+    if fmt == "table":
+        return format_text(table, digits)
+    if fmt == "csv":
+        return format_csv(table)
+    if fmt == "markdown":
+        return format_markdown(table, digits)
+    if fmt == "latex":
+        return _latex_long(table, digits)
+    if fmt == "json":
+        rows = [dict(zip(table.columns, row)) for row in table.rows]
+        return json.dumps({"columns": list(table.columns), "rows": rows, "notes": list(table.notes)},
+                          indent=2, allow_nan=False, default=_json_scalar) + "\n"
+    raise ValueError(f"unknown format {fmt!r}: choose among {', '.join(FORMATS)}")
+
+
+def _json_scalar(obj: object) -> object:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
 def render(evaluation: Evaluation, fmt: str = "table", per_run: bool = False) -> str:
     """The evaluation as text in ``fmt`` (one of :data:`FORMATS`).
 

@@ -68,14 +68,7 @@ def test_commands_take_q_r_and_controller_from_the_file(tmp_path):
 
 
 @pytest.mark.parametrize("args, message", [
-    (["--effect", "stiction"], "unknown effect 'stiction'"),
-    (["--effect", "creep:fraction=2"], "parameter fraction = 2 is outside its valid range"),
-    (["--effect", "rate:speed=1"], "unknown parameter 'speed'"),
-    (["--shape", "alpha=ninety"], "bad shape segment"),
-    (["--catheter", "ice-z"], "unknown virtual catheter"),
-    (["--motion", "zigzag"], "unknown motion"),
     (["--controller", "comp"], "needs the commands"),
-    (["--knobs", "3"], "bad --knobs"),
 ])
 def test_bad_input_is_one_error_line_and_no_file(tmp_path, args, message):
     out = tmp_path / "out.csv"
@@ -83,6 +76,30 @@ def test_bad_input_is_one_error_line_and_no_file(tmp_path, args, message):
     assert res.exit_code == 1
     assert res.output.startswith("Error: ") and message in res.output
     assert "Traceback" not in res.output and len(res.output.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--effect", "stiction"], "unknown effect 'stiction'"),
+    (["--effect", "creep:fraction=2"], "parameter fraction = 2 is outside its valid range"),
+    (["--effect", "rate:speed=1"], "unknown parameter 'speed'"),
+    (["--shape", "alpha=ninety"], "'ninety' is not a number"),
+    (["--shape", "alpha=abc"], "'abc' is not a number"),
+    (["--shape", "alpha=1e9"], "|alpha| <= 360 deg"),
+    (["--shape", "alpha=90,alpha=45"], "alpha is given twice"),
+    (["--catheter", "ice-z"], "unknown virtual catheter"),
+    (["--motion", "zigzag"], "unknown motion"),
+    (["--knobs", "3"], "expected 1, 2 or 1,2"),
+    (["--rotation", "1e309"], "must be a finite number"),
+])
+def test_bad_option_is_a_usage_error_with_one_error_line_and_no_file(tmp_path, args, message):
+    # a bad option value is the user's typing: exit 2 like typer's own usage errors (issue 12)
+    out = tmp_path / "out.csv"
+    res = _invoke(*args, "-o", str(out))
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert len(errors) == 1 and message in errors[0], res.output
+    assert "Traceback" not in res.output
     assert not out.exists()
 
 

@@ -10,7 +10,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import DataError, ModelError
-from hystcli.io import (Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
+from hystcli.io import (MAX_ABS_VALUE, Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
                         parse_run, read_run, save_model, write_run)
 from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
 
@@ -63,7 +63,8 @@ def test_missing_required_column_and_file(tmp_path):
         read_run(tmp_path / "bin.csv")
 
 
-finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+# any value a run may hold: finite and within the plausibility bound of io.MAX_ABS_VALUE
+finite = st.floats(-MAX_ABS_VALUE, MAX_ABS_VALUE, allow_nan=False, allow_infinity=False, width=64)
 
 
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])

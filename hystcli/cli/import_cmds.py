@@ -15,9 +15,9 @@ from typing import Annotated, Optional
 
 import typer
 
-from .. import importer
+from .. import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
 from ..errors import DataError
-from ..io import check_not_input, format_run, atomic_write_text
+from ..io import all_or_none, check_not_input, format_run
 from .app import FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, warn
 
 
@@ -110,7 +110,7 @@ def _render(rep: importer.ImportReport, meta: dict, out: Path) -> list[str]:
     ),
 )
 def import_(
-    raw: Annotated[list[Path], typer.Argument(metavar="RAW...", help="Raw log files (text or gzip).")],
+    raw: Annotated[list[Path], typer.Argument(metavar="RAW", help="Raw log files (text or gzip).")],
     output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Output run CSV (one input).")] = None,
     out_dir: Annotated[Optional[Path], typer.Option(
         "--out-dir", help="Folder for many inputs: RAW name without .gz and extension, plus .csv.")] = None,
@@ -181,8 +181,9 @@ def import_(
     # convert everything first: a bad file leaves no output at all
     done = [importer.convert(p, mapping, options) for p in raw]
     texts = [format_run(d.run) for d in done]
-    for dst, text in zip(targets, texts):
-        atomic_write_text(dst, text, inputs=raw)
+    with all_or_none() as pending:
+        for dst, text in zip(targets, texts):
+            pending.write_text(dst, text, inputs=raw)
 
     if fmt == OutputFormat.json:
         echo_json([dict(d.report.to_dict(), output=str(dst), meta=dict(d.run.meta)) for d, dst in zip(done, targets)])
