@@ -211,12 +211,15 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
         raise DataError(f"{source}: empty file (no header row)")
     header = [h.strip() for h in lines[i].split(",")]
     if len(header) == 1:
-        for sep, name in ((";", "semicolons"), ("\t", "tabs")):
-            if lines[i].count(sep):
-                raise DataError(f"{source}: the header has no commas but {lines[i].count(sep) + 1} fields "
-                                f"separated by {name}; a run CSV is comma-separated: convert the file "
-                                f"with `hyst import {source} --sep {'tab' if sep == chr(9) else repr(sep)} "
-                                f"--map t=1,q1=2,...`")
+        for sep, name, option in ((";", "semicolons", "';'"), ("\t", "tabs", "tab")):
+            fields = [f.strip() for f in lines[i].split(sep)]
+            if len(fields) > 1:
+                # Excel in many locales writes ';': say exactly how to convert the file
+                spec = ",".join(f"{f}={j + 1}" for j, f in enumerate(fields) if f in KNOWN_COLUMNS)
+                raise DataError(f"{source}: the header has no commas but {len(fields)} fields separated by "
+                                f"{name}; a run CSV is comma-separated: convert it with `hyst import "
+                                f"{source} --sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} "
+                                f"-o converted.csv`")
     if any(h == "" for h in header):
         raise DataError(f"{source}: header row has an empty column name")
     if len(set(header)) != len(header):
@@ -255,15 +258,10 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     cols: dict[str, np.ndarray] = {}
     for col in header:
         arr = df[col].to_numpy(dtype=np.float64)
-        finite = np.isfinite(arr)
-        if not finite.all():
-            row = int(np.flatnonzero(~finite)[0])
-            what = "NaN (missing value)" if np.isnan(arr[row]) else "an infinite value"
+        problem = _bad_value(col, arr)
+        if problem is not None:
+            row, what = problem
             raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: {what}")
-        if col in KNOWN_COLUMNS and arr.size and np.max(np.abs(arr)) > MAX_ABS_VALUE:
-            row = int(np.argmax(np.abs(arr) > MAX_ABS_VALUE))
-            raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: {float(arr[row]):g} is "
-                            f"beyond +-{MAX_ABS_VALUE:g}, not a plausible angle, current or time")
         cols[col] = arr
     run = Run(cols, meta, source)
     run.require("t", *require)
@@ -276,9 +274,36 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     return run
 
 
+def _bad_value(column: str, values: np.ndarray) -> tuple[int, str] | None:
+    """The first value :func:`read_run` refuses in a column, as (row, what is wrong), or None."""
+    finite = np.isfinite(values)
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        return row, "NaN (missing value)" if np.isnan(values[row]) else "an infinite value"
+    if column in KNOWN_COLUMNS and values.size and np.max(np.abs(values)) > MAX_ABS_VALUE:
+        row = int(np.argmax(np.abs(values) > MAX_ABS_VALUE))
+        return row, (f"{float(values[row]):g} is beyond +-{MAX_ABS_VALUE:g}, not a plausible angle, "
+                     "current or time")
+    return None
+
+
 def format_run(run: Run) -> str:
-    """Text of a run CSV: metadata lines, header, rows (floats in shortest round-trip form)."""
+    """Text of a run CSV: metadata lines, header, rows (floats in shortest round-trip form).
+
+    Raises
+    ------
+    DataError
+        A value :func:`read_run` would refuse (NaN, infinity, beyond :data:`MAX_ABS_VALUE`):
+        hyst never writes a run it cannot read back (NaN would be an empty cell).
+    """
     import pandas as pd
+
+    for name, values in run.columns.items():
+        problem = _bad_value(name, np.asarray(values))
+        if problem is not None:
+            row, what = problem
+            raise DataError(f"{run._where()}refusing to write column {name!r}, sample {row}: {what} "
+                            "(the file could not be read back)")
     buf = _io.StringIO()
     for k, v in run.meta.items():
         v = str(v).replace("\n", " ")
@@ -460,6 +485,15 @@ def all_or_none() -> Iterator[PendingOutputs]:
     pending = PendingOutputs()
     try:
         yield pending
+    except HystError as exc:
+        # a writer that was given a temporary path names it in its error: name the target instead
+        message = str(exc)
+        for tmp, target in pending._staged:
+            message = message.replace(tmp, str(target))
+        pending.discard()
+        if message != str(exc):
+            raise type(exc)(message) from None
+        raise
     except BaseException:
         pending.discard()
         raise

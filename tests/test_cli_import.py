@@ -128,19 +128,33 @@ def test_out_dir_many_files_and_json(tmp_path):
 
 @pytest.mark.parametrize("args, fragment", [
     (["--map", "t=1,q1=11"], "reads column 11"),
+    (["--preset", "mrdlab", "--meta", "catheter=x-{serial}"], "{serial}"),
+])
+def test_mappings_the_file_does_not_fit_exit_1_nothing_written(tmp_path, args, fragment):
+    out = tmp_path / "out.csv"
+    res = invoke("import", LOAD41, *args, "--comment", "%", "-o", out)
+    assert_error(res, fragment)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, fragment", [
     (["--map", "t=1,w1=2"], "unknown target column 'w1'"),
     (["--map", "t=1,q1=2:abc"], "'abc' is not a number"),
     (["--map", "t=1,q1=2:0"], "scale 0"),
     (["--preset", "nope"], "unknown preset 'nope'"),
     (["--map", "q1=2"], "no time column"),
-    (["--preset", "mrdlab", "--meta", "catheter=x-{serial}"], "{serial}"),
     (["--preset", "mrdlab", "--meta", "bad key=1"], "expected key=value"),
     (["--preset", "mrdlab", "--meta-from-header", "(?P<x"], "not a valid regular expression"),
+    (["--preset", "mrdlab", "--sep", ""], "separator"),
 ])
-def test_bad_mappings_exit_1_nothing_written(tmp_path, args, fragment):
+def test_malformed_mapping_options_are_usage_errors(tmp_path, args, fragment):
+    # a malformed option value is the user's typing (exit 2, issue 12), not bad data
     out = tmp_path / "out.csv"
     res = invoke("import", LOAD41, *args, "--comment", "%", "-o", out)
-    assert_error(res, fragment)
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert len(errors) == 1 and fragment in errors[0], res.output
+    assert "Traceback" not in res.output
     assert not out.exists()
 
 

@@ -91,6 +91,23 @@ def option_errors(param: str) -> Iterator[None]:
         usage_error(first_line(exc), param)
 
 
+@contextlib.contextmanager
+def about(*paths: Optional[Path]) -> Iterator[None]:
+    """Name the input file in a hyst error whose message names none of ``paths``.
+
+    Errors found deep in the core (an identification that fails, a filter that refuses a sample
+    rate) do not know which file the data came from; the command does.
+    """
+    try:
+        yield
+    except HystError as exc:
+        names = [str(p) for p in paths if p is not None]
+        message = first_line(exc)
+        if names and not any(name in message for name in names):
+            raise type(exc)(f"{names[0]}: {message}") from None
+        raise
+
+
 def distinct_outputs(**paths: Optional[Path]) -> None:
     """Usage error (exit 2) when two output options name the same file (one would overwrite the
     other, e.g. ``-o X --plot X`` would write the report into the figure)."""

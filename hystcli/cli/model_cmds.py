@@ -6,9 +6,8 @@ from typing import Annotated, Optional
 
 import typer
 
-from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command,
-                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error,
-                  warn)
+from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
+                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error, warn)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
@@ -53,16 +52,16 @@ def identify_cmd(
         with option_errors("--beta-catheter-mm / --beta-knob-mm"):
             geometry = Geometry(beta_catheter_mm, beta_knob_mm)
     io.check_not_input(output, [sweep])
-    if plot is not None:
-        io.check_not_input(plot, [sweep])
-    run = io.read_run(sweep, require=("t",))
-    result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
+    with about(sweep):
+        run = io.read_run(sweep, require=("t",))
+        result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
     meta = dict(result.model.meta)
     meta.update(io.provenance(sweep, catheter=run.meta.get("catheter")))
     model = replace(result.model, meta=meta, geometry=geometry or result.model.geometry)
+    # the figure and the model together or neither (an error drawing the one loses no old other)
     with io.all_or_none() as pending:
         if plot is not None:
-            plot_identification(run, result, pending.path(plot))
+            plot_identification(run, result, pending.path(plot, inputs=[sweep]))
         pending.write_text(output, io.dumps_model(model), inputs=[sweep])
     if not prints(fmt, quiet):
         pass
@@ -151,8 +150,9 @@ def predict_cmd(
 
     io.check_not_input(output, [run_path, model_path])
     model = io.load_model(model_path)
-    run = io.read_run(run_path)
-    predicted = compensation.predict(model, run)
+    with about(run_path):
+        run = io.read_run(run_path)
+        predicted = compensation.predict(model, run)
     io.write_run(output, predicted, inputs=[run_path, model_path])
     if prints(fmt, quiet):
         echo_table(_prediction_table(predicted), fmt)

@@ -9,7 +9,7 @@ import typer
 
 from ..calibration import CALIBRATED_NAMES
 from ..names import MOTIONS
-from .app import (EffectOpt, FormatOpt, OutOpt, OutputFormat, QuietOpt, SeedOpt, command, echo_json,
+from .app import (EffectOpt, FormatOpt, OutOpt, OutputFormat, QuietOpt, SeedOpt, about, command, echo_json,
                   echo_table, effects_option, info, option_errors, prints, usage_error)
 
 
@@ -69,6 +69,9 @@ def simulate_cmd(
         usage_error(f"unknown virtual catheter {catheter!r} (known: {', '.join(CALIBRATED_NAMES)})", "--catheter")
     if commands is None and motion not in MOTIONS:
         usage_error(f"unknown motion {motion!r} (known: {', '.join(MOTIONS)}, or give --commands)", "--motion")
+    if commands is None and controller not in (None, "none"):
+        usage_error(f"controller {controller!r} needs the commands it produced (--commands); a generated "
+                    "motion runs with controller none", "--controller")
     if not math.isfinite(rotation):
         usage_error(f"must be a finite number of degrees, got {rotation}", "--rotation")
     with option_errors("--shape"):
@@ -78,12 +81,13 @@ def simulate_cmd(
     knob_sel = parse_knobs(knobs)
     inputs = [commands] if commands is not None else []
     io.check_not_input(output, inputs)
-    cmd_run = io.read_run(commands, require=("t",)) if commands is not None else None
-    # the user-facing catheters are the calibrated ones, the same the sample data was recorded on
-    run = simulate_motion(calibrated_catheter(catheter), shp, motion, knobs=knob_sel, commands=cmd_run,
-                          controller=controller, effects=effs, seed=seed, trial=trial, rotation=rotation,
-                          noise=not no_noise)
-    io.write_run(output, run, inputs=inputs)
+    with about(commands):
+        cmd_run = io.read_run(commands, require=("t",)) if commands is not None else None
+        # the user-facing catheters are the calibrated ones, the same the sample data was recorded on
+        run = simulate_motion(calibrated_catheter(catheter), shp, motion, knobs=knob_sel, commands=cmd_run,
+                              controller=controller, effects=effs, seed=seed, trial=trial, rotation=rotation,
+                              noise=not no_noise)
+        io.write_run(output, run, inputs=inputs)
     summary = {"output": str(output), "samples": len(run), "knobs": run.knobs("q"), **dict(run.meta)}
     if not prints(fmt, quiet):
         return
