@@ -41,10 +41,12 @@ def test_preset_import_reports_what_was_done(tmp_path):
     res = invoke("import", LOAD41, "--preset", "mrdlab", "-o", out)
     assert res.exit_code == 0, res.output
     run = read_run(out, require=("q1", "y1", "c1"))
-    # raw row "1.990,63.00,1972.00,0.121,817.00,...": q1 = 63*360/8192, y1 = -(817*0.09), c1 = 0.121 A
+    # raw row "1.990,63.00,1972.00,0.121,817.00,...": q1 = 63*360/8192, y1 = -(817*0.09),
+    # c1 = 0.121 A = 121 mA
     assert run["q1"][1990] == 2.7685546875
     assert run["y1"][1990] == pytest.approx(-73.53, abs=1e-12)
-    assert run.meta["current_unit"] == "A" and run.meta["load_pct"] == "20.00"
+    assert run["c1"][1990] == pytest.approx(121.0, abs=1e-12)
+    assert run.meta["current_unit"] == "mA" and run.meta["load_pct"] == "20.00"
     text = res.stdout
     assert "rows 6000 read, 6000 written" in text
     assert "1000 Hz" in text
@@ -57,6 +59,10 @@ def test_user_map_equals_preset(tmp_path):
     assert invoke("import", LOAD41, "--preset", "mrdlab", "-o", a).exit_code == 0
     res = invoke("import", LOAD41, "--map", "t=1,q1=2:360/8192,y1=5:0.09,c1=4", "--comment", "%",
                  "--flip-output", "-o", b)
+    assert res.exit_code == 0, res.output
+    assert "states no current unit: the current is taken to be in mA" in res.stderr
+    res = invoke("import", LOAD41, "--map", "t=1,q1=2:360/8192,y1=5:0.09,c1=4", "--comment", "%",
+                 "--flip-output", "--meta", "current_unit=A", "-o", b)
     assert res.exit_code == 0, res.output
     ra, rb = read_run(a), read_run(b)
     for name in ("t", "q1", "y1", "c1"):
@@ -71,6 +77,17 @@ def test_map_overrides_preset_column(tmp_path):
     run = read_run(out)
     assert run["c1"][1990] == pytest.approx(121.0)  # 0.121 A = 121 mA
     assert run.meta["current_unit"] == "mA"
+
+
+@pytest.mark.parametrize("unit, expected", [("uA", 0.000121), ("mA", 0.121), ("A", 121.0)])
+def test_current_is_written_in_ma_from_the_unit_the_log_states(tmp_path, unit, expected):
+    out = tmp_path / "c.csv"
+    res = invoke("import", LOAD41, "--preset", "mrdlab", "--meta", f"current_unit={unit}", "-o", out)
+    assert res.exit_code == 0, res.output
+    run = read_run(out)
+    assert run["c1"][1990] == pytest.approx(expected, rel=1e-12) and run.meta["current_unit"] == "mA"
+    res = invoke("import", LOAD41, "--preset", "mrdlab", "--meta", "current_unit=kA", "-o", out)
+    assert_error(res, "current_unit 'kA' is not one of A, mA, uA")
 
 
 def test_show_mapping_round_trips_through_mapping_file(tmp_path):
