@@ -815,9 +815,15 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
         bottom.set_ylabel(f"output angle y{k} (deg)")
         for ax in (top, bottom):
             ax.grid(True, lw=0.3)
-        if j == 0:
-            top.legend(fontsize=7, loc="best")
-    fig.tight_layout()
+    # one legend for the whole figure: the first column (often the straight shaft) lacks the
+    # controllers that only the bent shapes run (Compensation+Shift, the diagnosed one)
+    legend: dict[str, object] = {}
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, handle)
+    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=min(len(legend), 5),
+               fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
     buf = _io.BytesIO()
     # no date or version stamps and fixed SVG ids: the same runs give the same bytes
     stamp = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None},

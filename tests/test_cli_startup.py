@@ -85,3 +85,24 @@ def test_usage_lines_name_arguments_not_python_types():
     usage = res.stdout.splitlines()[0]
     assert usage == "Usage: hyst evaluate [OPTIONS] RUN.csv..."
     assert "<list[Path]>" not in res.stdout and "{" not in usage
+
+
+def test_help_examples_name_files_that_exist():
+    # run from the repository root, every example's input path is a file there (the others, like
+    # model.json, are what the README's walk-through writes)
+    from pathlib import Path
+
+    from typer.testing import CliRunner
+
+    from hystcli.cli import app
+
+    root = Path(__file__).resolve().parents[1]
+    named = 0
+    for name in ("identify", "predict", "rotate-shift", "evaluate", "diagnose", "simulate", "demo", "import"):
+        text = CliRunner().invoke(app, [name, "--help"], terminal_width=400).stdout
+        for line in (ln for ln in text.splitlines() if "hyst " in ln):
+            for token in line.replace('"', " ").split():
+                if "/" in token and token.rstrip("/").endswith((".csv", ".json", ".gz")):
+                    named += 1
+                    assert list(root.glob(token)), (name, token)
+    assert named >= 4

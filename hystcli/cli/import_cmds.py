@@ -113,10 +113,13 @@ def _render(rep: importer.ImportReport, meta: dict, out: Path) -> list[str]:
         "falls as the input rises (reported), --resample HZ (anti-alias low-pass when lowering the "
         "rate), --detrend (remove the output drift; reported either way), --time-repair drop "
         "(default: an error on non-increasing time).\n\n"
-        "Examples:\n\n"
-        "    hyst import ../shared/real/mrdlab/load_freq/00.TXT.gz --preset mrdlab -o run00.csv\n\n"
-        "    hyst import log.txt --map t=1:0.001,q1=2:360/8192,y1=5:0.09,c1=4 --comment '%' -o run.csv\n\n"
-        "    hyst import raw/*.TXT.gz --preset mrdlab --resample 200 --out-dir runs/"
+        "The current is written in mA, converted from the unit the log states (metadata "
+        "current_unit: A, mA or uA; the mrdlab preset states A).\n\n"
+        "Examples (from the repository root):\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --preset mrdlab -o run41.csv\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --map t=1,q1=2:360/8192,y1=5:0.09,c1=4 "
+        "--comment '%' --meta current_unit=A -o run.csv\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/*.TXT.gz --preset mrdlab --resample 200 --out-dir ."
     ),
 )
 def import_(
