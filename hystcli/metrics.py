@@ -766,7 +766,6 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     """
     if fmt not in PLOT_FORMATS:
         raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
-    import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -824,17 +823,24 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=min(len(legend), 5),
                fontsize=8, frameon=False)
     fig.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
+    return figure_bytes(fig, fmt)
+
+
+def figure_bytes(fig: object, fmt: str) -> bytes:
+    """A matplotlib ``Figure`` as file bytes in ``fmt``, the same bytes for the same figure."""
+    import matplotlib
+
     buf = _io.BytesIO()
-    # no date or version stamps and fixed SVG ids: the same runs give the same bytes
+    # no date or version stamps and fixed SVG ids: the same data give the same bytes
     stamp = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None},
              "svg": {"Date": None}}[fmt]
     with matplotlib.rc_context({"svg.hashsalt": "hyst"}):
-        fig.savefig(buf, format=fmt, metadata=stamp)
+        fig.savefig(buf, format=fmt, metadata=stamp)  # type: ignore[attr-defined]
     return buf.getvalue()
 
 
 __all__ = [
-    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "FORMATS", "GROUP_FIELDS", "GroupResult",
+    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "FORMATS", "GROUP_FIELDS", "GroupResult", "figure_bytes",
     "Improvement", "RunResult", "Table", "UNKNOWN", "evaluate_runs", "evaluation_figure",
     "format_csv", "format_json", "format_latex", "format_markdown", "format_text", "group_table",
     "improvement", "mean_std", "parse_group_by", "ptpe", "render", "rmse", "run_table",
