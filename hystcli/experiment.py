@@ -59,7 +59,7 @@ from .compensation import compensate
 from .diagnose import diagnose as _diagnose
 from .errors import DataError
 from .identify import identify
-from .io import Run, atomic_write, atomic_write_text, read_run
+from .io import Run, all_or_none, read_run
 from .model import PAPER_OMEGA, Model, Shape
 from .shift import ReplayProbe, ShiftResult, detect_shift
 from .twin import VirtualCatheter, nonperiodic, periodic, simulate, simulate_motion, sweep
@@ -1003,12 +1003,11 @@ def write_outputs(result: ExperimentResult, out_dir: str | Path, with_figures: b
     if with_figures:
         files.update(figures(result, fmt))
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, data in files.items():
-        path = out / name
-        atomic_write(path, lambda f, d=data: f.write(d))
-        written.append(path)
-    return written
+    # every file or none: an error leaves the folder's old results whole, not half replaced
+    with all_or_none() as pending:
+        for name, data in files.items():
+            pending.write_bytes(out / name, data)
+    return [out / name for name in files]
 
 
 __all__ = [

@@ -321,7 +321,7 @@ def _rich_progress() -> Iterator[ProgressFn]:
         count = "" if done is None else f"{done}/{total}" if total else str(done)
         if task is None:
             bar.start()
-            task = bar.add_task(message[:44], total=total, count=count)
+            task = bar.add_task(message[:44], total=total, completed=done or 0, count=count)
         bar.update(task, description=message[:44], completed=done or 0, total=total, count=count)
 
     try:
