@@ -708,7 +708,7 @@ def _time(cols: dict[str, np.ndarray], linenos: np.ndarray, mapping: ImportMappi
     if repair == "error":
         j = int(bad[0]) + 1
         what = "repeats" if t[j] == t[j - 1] else "goes back"
-        raise DataError(f"{source}: time {what} at line {linenos[j]} ({t[j - 1]!r} then {t[j]!r}; "
+        raise DataError(f"{source}: time {what} at line {linenos[j]} ({float(t[j - 1])!r} then {float(t[j])!r}; "
                         f"{bad.size} non-increasing steps in all): use --time-repair drop to drop such rows")
     # keep a row only when it is later than every row kept before it
     keep = t > np.concatenate(([-np.inf], np.maximum.accumulate(t)[:-1]))

@@ -179,7 +179,7 @@ def test_malformed_mapping_options_are_usage_errors(tmp_path, args, fragment):
     (b"", "empty file"),
     (b"\x1f\x8b\x08\x00broken", "corrupt gzip"),
     (b"% header\n0.0,1,2,3,4\n0.001,1,2,oops,4\n", "'oops' is not a number"),
-    (b"% header\n0.0,1,2,3,4\n0.0,1,2,3,4\n", "time repeats at line 3"),
+    (b"% header\n0.0,1,2,3,4\n0.0,1,2,3,4\n", "time repeats at line 3 (0.0 then 0.0;"),
 ])
 def test_bad_files_exit_1_keep_existing_output(tmp_path, content, fragment):
     raw = tmp_path / "raw.txt"
