@@ -13,10 +13,12 @@ def main() -> None:
     """Entry point of the ``hyst`` console script."""
     try:
         from .cli import app
+
+        # typer builds the click commands before its own Ctrl-C handling starts: covered here too
+        app(prog_name="hyst")
     except KeyboardInterrupt:
         sys.stderr.write("Error: interrupted\n")
         raise SystemExit(130) from None
-    app(prog_name="hyst")
 
 
 if __name__ == "__main__":

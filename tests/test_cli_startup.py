@@ -106,3 +106,15 @@ def test_help_examples_name_files_that_exist():
                     named += 1
                     assert list(root.glob(token)), (name, token)
     assert named >= 4
+
+
+def test_ctrl_c_while_typer_builds_the_commands_is_no_traceback():
+    code = ("import sys, typer.main\n"
+            "def interrupted(*a, **k):\n"
+            "    raise KeyboardInterrupt\n"
+            "typer.main.get_command = interrupted\n"
+            "sys.argv = ['hyst', '--help']\n"
+            "from hystcli.__main__ import main\n"
+            "main()\n")
+    res = _python(code)
+    assert res.returncode == 130 and res.stderr == "Error: interrupted\n"

@@ -27,8 +27,10 @@ for _mod in [m for m in _ORDER if m in _found] + [m for m in _found if m not in 
 
 
 def main() -> None:
-    """Run the ``hyst`` command line (the console script is :func:`hystcli.__main__.main`)."""
-    app(prog_name="hyst")
+    """Run the ``hyst`` command line (the same as the console script, :func:`hystcli.__main__.main`)."""
+    from ..__main__ import main as entry
+
+    entry()
 
 
 __all__ = ["app", "main"]
