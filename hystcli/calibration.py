@@ -37,12 +37,14 @@ from __future__ import annotations
 
 from dataclasses import replace
 from types import MappingProxyType
-from typing import Mapping
+from typing import TYPE_CHECKING, Any, Mapping
 
-from .effects import Effect, make_effect
 from .errors import ModelError
 from .model import Geometry, KnobModel
-from .twin import CATHETERS, VirtualCatheter, get_catheter
+
+if TYPE_CHECKING:  # the twin and the effects load numba and scipy: imported when a catheter is built
+    from .effects import Effect
+    from .twin import VirtualCatheter
 
 
 def taut_heights(b_pos: float, b_neg: float, omega: float) -> tuple[float, float]:
@@ -75,7 +77,7 @@ def _knob(d_pos: float, d_neg: float, b_pos: float, b_neg: float, omega: float) 
 # --------------------------------------------------------------------------------------------
 # the unmodelled effects every calibrated catheter has (DESIGN.md section 8)
 # --------------------------------------------------------------------------------------------
-DEFAULT_EFFECTS: tuple[Effect, ...] = (
+_DEFAULT_EFFECTS: tuple[tuple[str, dict[str, float]], ...] = (
     # Viscoelastic creep of the polymer shaft and bending section: 26 % of every tip move arrives
     # with a 3.35 s time constant. This is the bulk of the paper's straight Compensation-Only
     # residual (PTPE 18.6, RMSE 7.7 deg): on the 25 s period of the 0.04 Hz input it acts as a
@@ -83,29 +85,30 @@ DEFAULT_EFFECTS: tuple[Effect, ...] = (
     # amplitude with x = 2 pi * 0.04 Hz * 3.35 s = 0.84 (PTPE ~20, RMSE ~7 deg).
     # Time constants of seconds and fractions of a few tens of percent are what polymer (Pebax)
     # catheter shafts show in step tests.
-    make_effect("creep", fraction=0.26, tau=3.35),
+    ("creep", dict(fraction=0.26, tau=3.35)),
     # Tendon-sheath (capstan) friction: the tension lost in the sheath grows as exp(mu * total
     # curvature). mu = 0.055 per rad of bend makes the backlash 9 % wider and the slope 9 %
     # lower at 90 deg of shaft bend (g = exp(0.055 * pi/2) = 1.09): the small growth of the
     # Compensation+Shift error with curvature in Table I (PTPE 24.3 at 45, 26.0 at 90 against
     # 18.6 deg straight). A small mu because the paper found the backlash change "negligible in
     # dynamic motions" (section IV).
-    make_effect("friction", mu=0.055),
+    ("friction", dict(mu=0.055)),
     # Viscous friction of the tendon in its sheath: the knob input reaches the bending section
     # through a first-order lag of 25 ms. Small on the 1-DoF input (about 10 deg/s of knob at
     # most: 0.25 deg), it doubles on the 2-DoF knob that runs twice as fast, and it biases the
     # edges the current shows on the fast identification sweep (40 deg/s: up to 1 deg), so the
     # identified model and Algorithm 1's offsets are each off by about a degree, as on a real
     # catheter.
-    make_effect("rate", tau=0.025),
+    ("rate", dict(tau=0.025)),
     # Coupling of the two knobs through the shared backbone: turning one knob by q moves the
     # other knob's dead zone by 0.10 * q. Only the 2-DoF runs (Table II) see it; it is why the
     # paper's 2-DoF Compensation+Shift residual (RMSE 10.1 deg) is larger than the 1-DoF one
     # (about 8 deg), as the paper's Discussion says ("there exist coupling effects in
     # mechanical structures, which is not detected ... from motor current").
-    make_effect("coupling", gain=0.10),
+    ("coupling", dict(gain=0.10)),
 )
-"""The unmodelled effects of the calibrated catheters (why each value: see the comments)."""
+"""The unmodelled effects of the calibrated catheters as (name, parameters); why each value: see
+the comments. :data:`DEFAULT_EFFECTS` holds them as validated effects."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -139,8 +142,11 @@ _CALIBRATED: Mapping[str, dict] = MappingProxyType({
     ),
 })
 
+CALIBRATED_NAMES: tuple[str, ...] = tuple(_CALIBRATED)
+"""Names of the calibrated catheters (``hyst simulate --catheter``, ``hyst sim-robot``, the demo)."""
 
-def calibrated_catheter(name: str) -> VirtualCatheter:
+
+def calibrated_catheter(name: str) -> "VirtualCatheter":
     """The virtual catheter ``name`` with the calibrated parameters and default effects.
 
     Built on :func:`hystcli.twin.get_catheter` (its sensors and motor-current model are kept);
@@ -151,17 +157,28 @@ def calibrated_catheter(name: str) -> VirtualCatheter:
     ModelError
         For an unknown name (names the known ones).
     """
-    base = get_catheter(name)
+    from .twin import get_catheter  # the twin loads numba and scipy: only when a catheter is built
+
     try:
         values = _CALIBRATED[name]
-    except KeyError:  # pragma: no cover - every twin catheter is calibrated
-        raise ModelError(f"virtual catheter {name!r} has no calibration "
-                         f"(calibrated: {', '.join(_CALIBRATED)})") from None
-    return replace(base, knobs=values["knobs"], geometry=values["geometry"],
-                   default_effects=tuple(e.spec() for e in DEFAULT_EFFECTS))
+    except KeyError:
+        raise ModelError(f"unknown virtual catheter {name!r} (known: {', '.join(_CALIBRATED)})") from None
+    return replace(get_catheter(name), knobs=values["knobs"], geometry=values["geometry"],
+                   default_effects=tuple(e.spec() for e in default_effects()))
 
 
-CALIBRATED_NAMES: tuple[str, ...] = tuple(n for n in CATHETERS if n in _CALIBRATED)
-"""Names of the calibrated catheters (the twin's catheters)."""
+def default_effects() -> "tuple[Effect, ...]":
+    """The calibrated catheters' unmodelled effects, validated (see :data:`_DEFAULT_EFFECTS`)."""
+    from .effects import make_effect
 
-__all__ = ["CALIBRATED_NAMES", "DEFAULT_EFFECTS", "calibrated_catheter", "taut_heights"]
+    return tuple(make_effect(name, **params) for name, params in _DEFAULT_EFFECTS)
+
+
+def __getattr__(name: str) -> Any:
+    # DEFAULT_EFFECTS is built on first use: building it imports the effects (numba)
+    if name == "DEFAULT_EFFECTS":
+        return default_effects()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+__all__ = ["CALIBRATED_NAMES", "DEFAULT_EFFECTS", "calibrated_catheter", "default_effects", "taut_heights"]

@@ -55,12 +55,12 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import metrics
-from .calibration import calibrated_catheter
+from .calibration import CALIBRATED_NAMES, calibrated_catheter
 from .compensation import compensate
 from .diagnose import diagnose as _diagnose
 from .errors import DataError
 from .identify import identify
-from .io import Run, atomic_write, atomic_write_text, read_run
+from .io import Run, all_or_none, read_run
 from .model import PAPER_OMEGA, Model, Shape
 from .shift import ReplayProbe, ShiftResult, detect_shift
 from .twin import VirtualCatheter, nonperiodic, periodic, simulate, simulate_motion, sweep
@@ -279,6 +279,43 @@ def reference_nonperiodic() -> Run:
     return _quantize(Run({"t": t, "r1": r1, "r2": r2}, {"motion": "nonperiodic"}))
 
 
+SAMPLE_DATA = Path("sample_data")
+"""The repository's data directory, relative to its root (where ``hyst demo`` reads it)."""
+
+SAMPLE_DATA_SEED = 0
+"""The seed ``scripts/make_sample_data.py`` recorded the committed ``sample_data/`` with."""
+
+
+def default_data_dir(cwd: str | Path | None = None) -> Path | None:
+    """``sample_data/`` when the folder ``cwd`` (default: the current one) holds the demo's
+    recordings, else None: the demo then records them from the twin.
+
+    An installed ``hyst`` ships no data files: the recordings are seeded, so recording them again
+    gives the very same runs (:func:`sample_data_runs`; a test holds them to the committed files
+    byte for byte).
+    """
+    folder = Path(cwd) / SAMPLE_DATA if cwd is not None else SAMPLE_DATA
+    return folder if reference_path(folder, "periodic").is_file() else None
+
+
+def sample_data_runs(seed: int = SAMPLE_DATA_SEED) -> dict[Path, Run]:
+    """Every recording of the demo's data directory, keyed by its path relative to it.
+
+    What ``scripts/make_sample_data.py`` writes (with ``seed`` 0 the committed ``sample_data/``)
+    and what :func:`run_protocol` records itself when it has no data directory.
+    """
+    runs: dict[Path, Run] = {reference_path(Path(), "periodic"): reference_periodic(),
+                             reference_path(Path(), "nonperiodic"): reference_nonperiodic()}
+    for name in CALIBRATED_NAMES:
+        cat = calibrated_catheter(name)
+        for k in KNOBS:
+            runs[sweep_path(Path(), name, k)] = record_sweep(cat, k, seed)
+        for s in SCENARIOS:
+            for k in KNOBS:
+                runs[replay_path(Path(), name, s, k)] = record_replay(cat, s, k, seed)
+    return runs
+
+
 class _Source:
     """Where the recordings come from: a data directory, or the twin directly."""
 
@@ -287,8 +324,8 @@ class _Source:
         self.seed = seed
         self.files: list[Path] = []
         if self.data_dir is not None and not self.data_dir.is_dir():
-            raise DataError(f"{self.data_dir}: no such data directory (run from the repository root "
-                            f"where sample_data/ is, give --data DIR, or --simulate)")
+            raise DataError(f"{self.data_dir}: no such data directory (give a folder made by "
+                            f"scripts/make_sample_data.py, or none to record from the twin)")
 
     def _read(self, path: Path, require: Sequence[str]) -> Run:
         if not path.exists():
@@ -601,7 +638,8 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
                  data_dir: str | Path | None = None,
                  progress: Callable[[str, int, int], None] | None = None,
                  scenarios: Sequence[str] | None = None,
-                 duration_scale: float = 1.0, diagnose: bool = True) -> ExperimentResult:
+                 duration_scale: float = 1.0, diagnose: bool = True,
+                 recording_seed: int | None = None) -> ExperimentResult:
     """Run the paper's experiment on the calibrated virtual catheters: Tables I and II.
 
     Parameters
@@ -627,6 +665,9 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     diagnose : bool
         Beyond the paper: diagnose each catheter's Compensation+Shift runs and run the
         ``comp+shift+diag`` controller (needs at least two such runs per catheter).
+    recording_seed : int, optional
+        Seed of the recordings when ``data_dir`` is None (default ``seed``);
+        :data:`SAMPLE_DATA_SEED` records exactly the committed ``sample_data/``.
 
     Returns
     -------
@@ -660,7 +701,8 @@ def _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, durati
             raise DataError(f"unknown scenario {sorted(unknown)[0]!r} "
                             f"(known: {', '.join(s.name for s in SCENARIOS)})")
     cats = [calibrated_catheter(name) for name in catheters]
-    source = _Source(None if data_dir is None else Path(data_dir), int(seed))
+    source = _Source(None if data_dir is None else Path(data_dir),
+                     int(seed if recording_seed is None else recording_seed))
 
     def runs_per_catheter() -> int:
         return sum((len(CONTROLLERS) - (0 if s.bent else 1)) * len(s.knob_groups) for s in wanted)
@@ -757,7 +799,7 @@ def _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, durati
 
     config = {
         "catheters": list(catheters), "trials": int(trials), "seed": int(seed),
-        "data": "twin (simulated recordings)" if data_dir is None else str(data_dir),
+        "data": (f"twin (simulated recordings, seed {source.seed})" if data_dir is None else str(data_dir)),
         "input_files": [str(p) for p in source.files],
         "scenarios": [s.name for s in wanted],
         "duration_scale": float(duration_scale),
@@ -970,12 +1012,11 @@ def write_outputs(result: ExperimentResult, out_dir: str | Path, with_figures: b
     if with_figures:
         files.update(figures(result, fmt))
     out.mkdir(parents=True, exist_ok=True)
-    written = []
-    for name, data in files.items():
-        path = out / name
-        atomic_write(path, lambda f, d=data: f.write(d))
-        written.append(path)
-    return written
+    # every file or none: an error leaves the folder's old results whole, not half replaced
+    with all_or_none() as pending:
+        for name, data in files.items():
+            pending.write_bytes(out / name, data)
+    return [out / name for name in files]
 
 
 __all__ = [
@@ -983,5 +1024,6 @@ __all__ = [
     "PAPER_TABLE_II", "SCENARIOS", "SCENARIOS_1DOF", "SCENARIO_2DOF", "Scenario", "ShiftRow", "TOLERANCE",
     "comparison_table", "figures", "identify_catheter", "record_replay", "record_sweep",
     "reference_nonperiodic", "reference_path", "reference_periodic", "render", "replay_motion",
-    "replay_path", "run_protocol", "shift_table", "sweep_path", "write_outputs",
+    "replay_path", "run_protocol", "SAMPLE_DATA", "SAMPLE_DATA_SEED", "default_data_dir", "sample_data_runs", "shift_table",
+    "sweep_path", "write_outputs",
 ]

@@ -7,18 +7,26 @@ current are not delayed; live we can only filter causally.
 from __future__ import annotations
 
 import numpy as np
-from scipy import signal
 
 from .errors import DataError
 
 PAPER_CUTOFF_HZ = 20.0
 PAPER_ORDER = 3
 
+MAX_SAMPLE_RATE_HZ = 1e6
+"""Fastest sample rate the filter accepts. Far above any lab recorder; beyond about 1e8 Hz the
+Butterworth design for 20 Hz is numerically singular, and such a rate means the time column is
+not in seconds."""
+
 
 def butter_sos(fs: float, cutoff: float = PAPER_CUTOFF_HZ, order: int = PAPER_ORDER) -> np.ndarray:
     """Second-order sections of the Butterworth low-pass (cutoff in Hz, sample rate ``fs``)."""
     if not fs > 0:
         raise DataError(f"sample rate must be positive, got {fs}")
+    if fs > MAX_SAMPLE_RATE_HZ:
+        raise DataError(f"sample rate {fs:.6g} Hz is beyond {MAX_SAMPLE_RATE_HZ:g} Hz: is the time column t "
+                        "in seconds?")
+    from scipy import signal  # here: scipy.signal takes longer to import than the whole CLI may
     nyq = 0.5 * fs
     if cutoff >= nyq:
         # Sampled too slowly for the filter to do anything: the signal is already band-limited.
@@ -43,6 +51,8 @@ def lowpass(x: np.ndarray, fs: float, cutoff: float = PAPER_CUTOFF_HZ, order: in
     zero_phase : bool
         Forward-backward filtering (offline) when True, causal (live) when False.
     """
+    from scipy import signal
+
     x = np.asarray(x, dtype=float)
     sos = butter_sos(fs, cutoff, order)
     if zero_phase:

@@ -401,6 +401,14 @@ def load_mapping(path: str | os.PathLike) -> ImportMapping:
     return mapping_from_dict(data, source=str(path))
 
 
+CURRENT_UNIT = "mA"
+"""The unit of a run's current columns ``c<k>`` (DESIGN.md section 6)."""
+
+CURRENT_UNITS = {"A": 1000.0, "mA": 1.0, "uA": 1e-3}
+"""Current units a log may state (metadata ``current_unit``; mA when it states none), with the
+factor to mA the import applies."""
+
+
 # --------------------------------------------------------------------------------------------
 # presets
 # --------------------------------------------------------------------------------------------
@@ -411,7 +419,7 @@ MRDLAB = ImportMapping(
         ColumnMap("t", 1, 1.0),
         ColumnMap("q1", 2, 360.0 / 8192.0),   # back-end (input spindle) encoder, 8192 counts/rev
         ColumnMap("y1", 5, 360.0 / 4000.0),   # front-end (jaw) encoder, 4000 counts/rev
-        ColumnMap("c1", 4, 1.0),              # back-end motor current, A
+        ColumnMap("c1", 4, 1.0),              # back-end motor current in A (current_unit): written in mA
     ),
     separator=",",
     comment="%",
@@ -700,7 +708,7 @@ def _time(cols: dict[str, np.ndarray], linenos: np.ndarray, mapping: ImportMappi
     if repair == "error":
         j = int(bad[0]) + 1
         what = "repeats" if t[j] == t[j - 1] else "goes back"
-        raise DataError(f"{source}: time {what} at line {linenos[j]} ({t[j - 1]!r} then {t[j]!r}; "
+        raise DataError(f"{source}: time {what} at line {linenos[j]} ({float(t[j - 1])!r} then {float(t[j])!r}; "
                         f"{bad.size} non-increasing steps in all): use --time-repair drop to drop such rows")
     # keep a row only when it is later than every row kept before it
     keep = t > np.concatenate(([-np.inf], np.maximum.accumulate(t)[:-1]))
@@ -843,12 +851,6 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
         knob_reports.append(KnobReport(k, g, bool(flip and (f"y{k}" in cols or f"r{k}" in cols)),
                                        drift, bool(options.detrend and drift is not None), zero))
 
-    # the run's column order of DESIGN.md section 6, whatever the mapping's order
-    ordered = {name: _round(cols[name], options.decimals) for name in TARGETS if name in cols}
-    if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
-        raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
-                        f"({1.0 / (options.resample or rate_in):.3g} s)")
-
     found: dict[str, str] = {}
     for pat in mapping.meta_from_header:
         hit = pat.search(header)
@@ -866,7 +868,30 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     meta.update(found)
     meta.update(_render_meta({str(k): str(v) for k, v in options.meta.items()}, found, source))
     meta.setdefault("source_file", Path(source).name)
-    meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased)
+
+    # motor current in mA, the unit of a run (DESIGN.md section 6), from the unit the log states
+    unit = meta.get("current_unit", CURRENT_UNIT)
+    if "current_unit" not in meta and any(name[0] == "c" for name in cols):
+        warnings.append(f"the log states no current unit: the current is taken to be in {CURRENT_UNIT} "
+                        "(--meta current_unit=A if it is in amperes)")
+    if unit not in CURRENT_UNITS:
+        raise DataError(f"{source}: current_unit {unit!r} is not one of {', '.join(CURRENT_UNITS)} "
+                        "(state the log's current unit with --meta current_unit=A, mA or uA)")
+    to_ma = CURRENT_UNITS[unit]
+    if any(name[0] == "c" for name in cols):
+        meta["current_unit"] = CURRENT_UNIT
+    for name in [n for n in cols if n[0] == "c"]:
+        # rounded in the log's unit first: --decimals keeps the resolution the log's unit gives
+        # (4 decimals of A stay 0.1 mA, not 1e-4 mA), then again so x1000 leaves no float dust
+        cols[name] = _round(_round(cols[name], options.decimals) * to_ma, options.decimals)
+
+    # the run's column order of DESIGN.md section 6, whatever the mapping's order
+    ordered = {name: _round(cols[name], options.decimals) for name in TARGETS if name in cols}
+    if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
+        raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
+                        f"({1.0 / (options.resample or rate_in):.3g} s)")
+    current = (unit, to_ma) if any(name[0] == "c" for name in cols) else None
+    meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased, current)
     run = Run(ordered, meta, source)
 
     tt = run["t"]
@@ -882,9 +907,11 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
 
 
 def _import_note(mapping: ImportMapping, flip: bool, options: ImportOptions, knobs: Sequence[KnobReport],
-                 dropped: int, anti_aliased: bool) -> str:
+                 dropped: int, anti_aliased: bool, current: tuple[str, float] | None = None) -> str:
     """One metadata line saying how the file was converted, so the run explains itself."""
     parts = [f"mapping {mapping.name} ({' '.join(c.spec() for c in mapping.columns)})"]
+    if current is not None and current[1] != 1.0:
+        parts.append(f"current in {current[0]} converted to {CURRENT_UNIT} (x{current[1]:g})")
     parts.append("output flipped" if flip else "output as read")
     zeros = [f"{name} {v:.6g}" for k in knobs for name, v in k.zero.items()]
     parts.append(f"zero {options.zero}" + (f" ({', '.join(zeros)} subtracted)" if zeros else ""))

@@ -19,10 +19,9 @@ import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import Callable, Iterable, Mapping
+from typing import Callable, Iterable, Iterator, Mapping
 
 import numpy as np
-import pandas as pd
 
 from .errors import DataError, HystError, ModelError
 from .model import (PARAM_NAMES, EffectSpec, Geometry, KnobIdentification, KnobModel, Model)
@@ -31,6 +30,11 @@ MODEL_FORMAT = "hyst-model"
 MODEL_VERSION = 1
 
 KNOWN_COLUMNS = ("t", "q1", "q2", "y1", "y2", "c1", "c2", "r1", "r2")
+MAX_ABS_VALUE = 1e10
+"""Largest magnitude a known column may hold. Far beyond any angle (deg), current (mA) or time (s)
+a lab records, yet small enough that squares and sums of a whole run stay finite: a cell like
+``1e308`` is a corrupt file, refused when read rather than overflowing deep inside a command."""
+
 KNOWN_META = ("catheter", "controller", "shape", "motion", "trial", "rotation", "offset1", "offset2", "condition",
               "shift_ignored")
 
@@ -62,6 +66,10 @@ class Run:
         n = None
         for name, values in self.columns.items():
             arr = np.asarray(values, dtype=np.float64)
+            if arr is values and arr.flags.writeable:
+                # the caller's own array: freeze a copy, never the caller's (a read-only array is
+                # shared as it is: it came from another Run, or its owner chose to freeze it)
+                arr = arr.copy()
             if arr.ndim != 1:
                 raise DataError(f"{self._where()}column {name} must be 1-D")
             if n is None:
@@ -178,7 +186,8 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
     if p.is_dir():
         raise DataError(f"{name}: is a directory, not a run CSV")
     try:
-        text = p.read_text(encoding="utf-8")
+        # utf-8-sig: Excel starts its UTF-8 CSVs with a byte-order mark, which is not part of 't'
+        text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
         raise DataError(f"{name}: not a text CSV file (not UTF-8)") from None
     except OSError as exc:
@@ -188,7 +197,8 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
 
 def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",)) -> Run:
     """Parse the text of a run CSV (see :func:`read_run`)."""
-    lines = text.splitlines()
+    import pandas as pd  # here, not at the top: pandas alone costs `hyst --help` half a second
+    lines = text.removeprefix("\ufeff").splitlines()
     meta: dict[str, str] = {}
     i = 0
     while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
@@ -200,6 +210,16 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     if i >= len(lines):
         raise DataError(f"{source}: empty file (no header row)")
     header = [h.strip() for h in lines[i].split(",")]
+    if len(header) == 1:
+        for sep, name, option in ((";", "semicolons", "';'"), ("\t", "tabs", "tab")):
+            fields = [f.strip() for f in lines[i].split(sep)]
+            if len(fields) > 1:
+                # Excel in many locales writes ';': say exactly how to convert the file
+                spec = ",".join(f"{f}={j + 1}" for j, f in enumerate(fields) if f in KNOWN_COLUMNS)
+                raise DataError(f"{source}: the header has no commas but {len(fields)} fields separated by "
+                                f"{name}; a run CSV is comma-separated: convert it with `hyst import "
+                                f"{source} --sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} "
+                                f"-o converted.csv`")
     if any(h == "" for h in header):
         raise DataError(f"{source}: header row has an empty column name")
     if len(set(header)) != len(header):
@@ -238,10 +258,9 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     cols: dict[str, np.ndarray] = {}
     for col in header:
         arr = df[col].to_numpy(dtype=np.float64)
-        finite = np.isfinite(arr)
-        if not finite.all():
-            row = int(np.flatnonzero(~finite)[0])
-            what = "NaN (missing value)" if np.isnan(arr[row]) else "an infinite value"
+        problem = _bad_value(col, arr)
+        if problem is not None:
+            row, what = problem
             raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: {what}")
         cols[col] = arr
     run = Run(cols, meta, source)
@@ -251,12 +270,40 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
     if dt.size and not np.all(dt > 0):
         row = int(np.flatnonzero(~(dt > 0))[0]) + 1
         raise DataError(f"{source}: column 't' is not strictly increasing at line {header_line + 1 + row} "
-                        f"({t[row - 1]!r} then {t[row]!r})")
+                        f"({float(t[row - 1])!r} then {float(t[row])!r})")
     return run
 
 
+def _bad_value(column: str, values: np.ndarray) -> tuple[int, str] | None:
+    """The first value :func:`read_run` refuses in a column, as (row, what is wrong), or None."""
+    finite = np.isfinite(values)
+    if not finite.all():
+        row = int(np.flatnonzero(~finite)[0])
+        return row, "NaN (missing value)" if np.isnan(values[row]) else "an infinite value"
+    if column in KNOWN_COLUMNS and values.size and np.max(np.abs(values)) > MAX_ABS_VALUE:
+        row = int(np.argmax(np.abs(values) > MAX_ABS_VALUE))
+        return row, (f"{float(values[row]):g} is beyond +-{MAX_ABS_VALUE:g}, not a plausible angle, "
+                     "current or time")
+    return None
+
+
 def format_run(run: Run) -> str:
-    """Text of a run CSV: metadata lines, header, rows (floats in shortest round-trip form)."""
+    """Text of a run CSV: metadata lines, header, rows (floats in shortest round-trip form).
+
+    Raises
+    ------
+    DataError
+        A value :func:`read_run` would refuse (NaN, infinity, beyond :data:`MAX_ABS_VALUE`):
+        hyst never writes a run it cannot read back (NaN would be an empty cell).
+    """
+    import pandas as pd
+
+    for name, values in run.columns.items():
+        problem = _bad_value(name, np.asarray(values))
+        if problem is not None:
+            row, what = problem
+            raise DataError(f"{run._where()}refusing to write column {name!r}, sample {row}: {what} "
+                            "(the file could not be read back)")
     buf = _io.StringIO()
     for k, v in run.meta.items():
         v = str(v).replace("\n", " ")
@@ -301,27 +348,156 @@ def atomic_write_text(path: str | os.PathLike, text: str,
     atomic_write(path, lambda f: f.write(text.encode("utf-8")), inputs=inputs)
 
 
-def atomic_write(path: str | os.PathLike, writer: Callable, inputs: Iterable[str | os.PathLike] = ()) -> None:
-    """Call ``writer(binary_file)`` on a temporary file, then rename it onto ``path``.
+def _file_mode() -> int:
+    """Mode of a new file under the process's umask (what ``open(path, "w")`` would give)."""
+    # mkstemp makes its file 0600 whatever the umask; reading the umask means setting it, so it is
+    # put back at once (read each time: a caller may change its umask between two writes)
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
 
-    On any error the temporary file is removed and ``path`` is left as it was.
-    """
+
+def _stage(target: Path) -> str:
+    """An empty temporary file beside ``target``, with the mode a new file would get; its name
+    keeps the target's suffix, since some writers (matplotlib) choose the format by it."""
+    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=f".tmp{target.suffix}", dir=target.parent)
+    try:
+        os.fchmod(fd, _file_mode())
+    finally:
+        os.close(fd)
+    return tmp
+
+
+def _check_target(path: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> Path:
     check_not_input(path, inputs)
     target = Path(path)
     folder = target.parent if str(target.parent) else Path(".")
     if not folder.is_dir():
         raise DataError(f"{path}: the folder {folder} does not exist")
-    fd, tmp = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=folder)
+    if target.is_dir():
+        raise DataError(f"{path}: is a directory; give a file name")
+    return target
+
+
+def _cannot_write(path: str | os.PathLike, exc: OSError) -> DataError:
+    # the message names the file the user asked for, never the temporary file beside it
+    return DataError(f"{path}: cannot write ({exc.strerror or exc})")
+
+
+def atomic_write(path: str | os.PathLike, writer: Callable, inputs: Iterable[str | os.PathLike] = ()) -> None:
+    """Call ``writer(binary_file)`` on a temporary file, then rename it onto ``path``.
+
+    On any error the temporary file is removed and ``path`` is left as it was. The file gets
+    the mode the umask gives a new file.
+    """
+    target = _check_target(path, inputs)
     try:
-        with os.fdopen(fd, "wb") as f:
+        tmp = _stage(target)
+    except OSError as exc:
+        raise _cannot_write(path, exc) from None
+    try:
+        with open(tmp, "wb") as f:
             writer(f)
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, target)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise _cannot_write(path, exc) from None
         raise
+
+
+class PendingOutputs:
+    """The output files of one command, staged beside their targets until all are written.
+
+    Made by :func:`all_or_none`; each ``write_*`` (or a writer given :meth:`path`) fills a
+    temporary file, and only when every one succeeded are they renamed onto their targets.
+    """
+
+    def __init__(self) -> None:
+        self._staged: list[tuple[str, Path]] = []
+
+    def path(self, target: str | os.PathLike, inputs: Iterable[str | os.PathLike] = ()) -> str:
+        """A temporary path (same folder and suffix) for a writer that wants a file name."""
+        checked = _check_target(target, inputs)
+        if any(t.resolve() == checked.resolve() for _, t in self._staged):
+            raise DataError(f"{target}: given as two of the outputs; choose different files")
+        try:
+            tmp = _stage(checked)
+        except OSError as exc:
+            raise _cannot_write(target, exc) from None
+        self._staged.append((tmp, checked))
+        return tmp
+
+    def write_bytes(self, target: str | os.PathLike, data: bytes,
+                    inputs: Iterable[str | os.PathLike] = ()) -> None:
+        """Stage ``data`` for ``target``."""
+        tmp = self.path(target, inputs)
+        try:
+            with open(tmp, "wb") as f:
+                f.write(data)
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise _cannot_write(target, exc) from None
+
+    def write_text(self, target: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = ()) -> None:
+        """Stage ``text`` (UTF-8) for ``target``."""
+        self.write_bytes(target, text.encode("utf-8"), inputs)
+
+    def discard(self) -> None:
+        """Remove every staged file; no target is touched."""
+        for tmp, _ in self._staged:
+            with contextlib.suppress(OSError):
+                os.unlink(tmp)
+        self._staged.clear()
+
+    def commit(self) -> list[Path]:
+        """Rename every staged file onto its target; returns the targets."""
+        done: list[Path] = []
+        try:
+            for tmp, target in self._staged:
+                os.replace(tmp, target)
+                done.append(target)
+        except OSError as exc:
+            # a rename in the same folder fails only if the folder changed under us: say what
+            # was written rather than pretend nothing was
+            self._staged = self._staged[len(done):]
+            self.discard()
+            written = f" ({', '.join(map(str, done))} already written)" if done else ""
+            raise DataError(f"{target}: cannot write ({exc.strerror or exc}){written}") from None
+        self._staged.clear()
+        return done
+
+
+@contextlib.contextmanager
+def all_or_none() -> Iterator[PendingOutputs]:
+    """Write several output files all or none.
+
+    Examples
+    --------
+    >>> with all_or_none() as out:                 # doctest: +SKIP
+    ...     out.write_text("report.json", report)
+    ...     out.write_text("model.json", model)     # an error here leaves neither file
+    """
+    pending = PendingOutputs()
+    try:
+        yield pending
+    except HystError as exc:
+        # a writer that was given a temporary path names it in its error: name the target instead
+        message = str(exc)
+        for tmp, target in pending._staged:
+            message = message.replace(tmp, str(target))
+        pending.discard()
+        if message != str(exc):
+            raise type(exc)(message) from None
+        raise
+    except BaseException:
+        pending.discard()
+        raise
+    pending.commit()
 
 
 # --------------------------------------------------------------------------------------------

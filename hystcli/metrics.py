@@ -682,6 +682,33 @@ def _latex_long(table: Table, digits: int) -> str:
 FORMATS = ("table", "json", "csv", "markdown", "latex")
 
 
+def format_table(table: Table, fmt: str = "table", digits: int = 2) -> str:
+    """Any :class:`Table` as text in ``fmt`` (one of :data:`FORMATS`).
+
+    JSON is ``{"columns": [...], "rows": [{column: value}], "notes": [...]}`` at full precision;
+    the other formats are those of the evaluation tables (``latex`` as one long tabular).
+    """
+    if fmt == "table":
+        return format_text(table, digits)
+    if fmt == "csv":
+        return format_csv(table)
+    if fmt == "markdown":
+        return format_markdown(table, digits)
+    if fmt == "latex":
+        return _latex_long(table, digits)
+    if fmt == "json":
+        rows = [dict(zip(table.columns, row)) for row in table.rows]
+        return json.dumps({"columns": list(table.columns), "rows": rows, "notes": list(table.notes)},
+                          indent=2, allow_nan=False, default=_json_scalar) + "\n"
+    raise ValueError(f"unknown format {fmt!r}: choose among {', '.join(FORMATS)}")
+
+
+def _json_scalar(obj: object) -> object:
+    if isinstance(obj, np.generic):
+        return obj.item()
+    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
+
+
 def render(evaluation: Evaluation, fmt: str = "table", per_run: bool = False) -> str:
     """The evaluation as text in ``fmt`` (one of :data:`FORMATS`).
 
@@ -739,7 +766,6 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     """
     if fmt not in PLOT_FORMATS:
         raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
-    import matplotlib
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -788,20 +814,33 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
         bottom.set_ylabel(f"output angle y{k} (deg)")
         for ax in (top, bottom):
             ax.grid(True, lw=0.3)
-        if j == 0:
-            top.legend(fontsize=7, loc="best")
-    fig.tight_layout()
+    # one legend for the whole figure: the first column (often the straight shaft) lacks the
+    # controllers that only the bent shapes run (Compensation+Shift, the diagnosed one)
+    legend: dict[str, object] = {}
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, handle)
+    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=min(len(legend), 5),
+               fontsize=8, frameon=False)
+    fig.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
+    return figure_bytes(fig, fmt)
+
+
+def figure_bytes(fig: object, fmt: str) -> bytes:
+    """A matplotlib ``Figure`` as file bytes in ``fmt``, the same bytes for the same figure."""
+    import matplotlib
+
     buf = _io.BytesIO()
-    # no date or version stamps and fixed SVG ids: the same runs give the same bytes
+    # no date or version stamps and fixed SVG ids: the same data give the same bytes
     stamp = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None},
              "svg": {"Date": None}}[fmt]
     with matplotlib.rc_context({"svg.hashsalt": "hyst"}):
-        fig.savefig(buf, format=fmt, metadata=stamp)
+        fig.savefig(buf, format=fmt, metadata=stamp)  # type: ignore[attr-defined]
     return buf.getvalue()
 
 
 __all__ = [
-    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "FORMATS", "GROUP_FIELDS", "GroupResult",
+    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "FORMATS", "GROUP_FIELDS", "GroupResult", "figure_bytes",
     "Improvement", "RunResult", "Table", "UNKNOWN", "evaluate_runs", "evaluation_figure",
     "format_csv", "format_json", "format_latex", "format_markdown", "format_text", "group_table",
     "improvement", "mean_std", "parse_group_by", "ptpe", "render", "rmse", "run_table",

@@ -26,7 +26,6 @@ from types import MappingProxyType
 from typing import Mapping, Sequence
 
 import numpy as np
-from numba import njit
 
 from .errors import ModelError
 
@@ -36,6 +35,14 @@ PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "o
 PAPER_OMEGA = 1.45
 """The paper's average slope omega (section III: "We used omega as 1.45 as the average value")."""
 
+MAX_PARAM = 1e6
+"""Largest magnitude of a knob parameter (deg, or deg/deg for omega) or a geometry length (mm).
+A knob turns a few turns at most (thousands of degrees); a value like 1e308 is a corrupt model
+file, refused rather than overflowing the envelopes to infinity."""
+
+MAX_SEGMENT_BEND = 360.0
+"""Largest |alpha| of one shaft segment (deg): a full loop. More is not a shape but a typo."""
+
 # Tolerance of the validity checks: parameters that come out of a least-squares fit may sit on a
 # constraint to within rounding; anything beyond this is a real violation.
 _TOL = 1e-9
@@ -44,25 +51,17 @@ _TOL = 1e-9
 # --------------------------------------------------------------------------------------------
 # compiled kernels
 # --------------------------------------------------------------------------------------------
-@njit(cache=True, fastmath=False)
-def _f_up(u, dhat_pos, d_pos, omega, h_pos):
-    # branch-free form of the three-piece ascending envelope (L2, L3, L4)
-    return h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
-
-
-@njit(cache=True, fastmath=False)
-def _f_dn(u, d_neg, dhat_neg, omega, h_neg):
-    # branch-free form of the three-piece descending envelope (L8, L7, L6)
-    return h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
-
-
-@njit(cache=True, fastmath=False)
-def _forward_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, out):
+# The kernels are written in plain Python and compiled with numba on first use (not at import:
+# numba costs the command line a third of a second to start, and `hyst --help` needs no model).
+# The plain functions stay callable: they are the reference the tests hold the compiled ones to.
+# The envelopes are written out in each kernel (branch-free: h + omega * (min(u - a, 0) +
+# max(u - b, 0)), lines L2-L4 and L8-L6) so that the kernels call no other function.
+def _forward_py(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, out):
     y = y0
     for i in range(x.shape[0]):
         u = x[i] - offset
-        lo = _f_up(u, dhat_pos, d_pos, omega, h_pos)
-        hi = _f_dn(u, d_neg, dhat_neg, omega, h_neg)
+        lo = h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
+        hi = h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
         if y < lo:
             y = lo
         if y > hi:
@@ -71,8 +70,7 @@ def _forward_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h
     return y
 
 
-@njit(cache=True, fastmath=False)
-def _inverse_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, x0, out):
+def _inverse_py(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, x0, out):
     y = y0
     x = x0
     for i in range(r.shape[0]):
@@ -93,6 +91,28 @@ def _inverse_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h
             y = ri
         out[i] = x
     return y
+
+
+_COMPILED: dict = {}
+
+
+def _kernel(py_func):
+    """The numba-compiled ``py_func`` (compiled, or read from numba's on-disk cache, once)."""
+    fn = _COMPILED.get(py_func)
+    if fn is None:
+        from numba import njit
+
+        fn = _COMPILED[py_func] = njit(cache=True, fastmath=False)(py_func)
+    return fn
+
+
+def _check_finite(values: np.ndarray, where: str, what: str) -> None:
+    # NaN would pass through the clamp recursion silently (every comparison with NaN is false, so
+    # the output holds its last value): an error names the first bad sample instead
+    bad = ~np.isfinite(values)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ModelError(f"{where}: {what} must be finite, sample {i} is {float(values[i])!r}")
 
 
 # --------------------------------------------------------------------------------------------
@@ -141,6 +161,9 @@ class KnobModel:
                 raise ModelError(f"parameter {name} must be a number, got {value!r}") from None
             if not math.isfinite(value):
                 raise ModelError(f"parameter {name} must be finite, got {value}")
+            if abs(value) > MAX_PARAM:
+                raise ModelError(f"parameter {name} = {value:g} is beyond +-{MAX_PARAM:g} "
+                                 f"(not a knob angle or slope)")
             object.__setattr__(self, name, value)
         if not self.omega > 0:
             raise ModelError(f"invalid model: omega > 0 is violated (omega = {self.omega:g})")
@@ -240,8 +263,11 @@ class KnobModel:
         x = np.ascontiguousarray(q, dtype=np.float64)
         if x.ndim != 1:
             raise ModelError(f"forward expects a 1-D array of knob angles, got shape {x.shape}")
+        _check_finite(x, "forward", "knob angles")
+        if not math.isfinite(y0):
+            raise ModelError(f"forward: the initial output y0 must be finite, got {y0}")
         out = np.empty_like(x)
-        _forward_kernel(x, *self._kernel_args(), float(y0), out)
+        _kernel(_forward_py)(x, *self._kernel_args(), float(y0), out)
         return out
 
     def inverse(self, r: np.ndarray | Sequence[float], y0: float = 0.0,
@@ -271,12 +297,13 @@ class KnobModel:
         rr = np.ascontiguousarray(r, dtype=np.float64)
         if rr.ndim != 1:
             raise ModelError(f"inverse expects a 1-D array of tip angles, got shape {rr.shape}")
-        if not np.all(np.isfinite(rr)):
-            raise ModelError("inverse: desired tip angles must be finite")
+        _check_finite(rr, "inverse", "desired tip angles")
+        if not (math.isfinite(y0) and (q0 is None or math.isfinite(q0))):
+            raise ModelError(f"inverse: the initial output y0 and knob angle q0 must be finite, got {y0}, {q0}")
         if q0 is None:
             q0 = self.holding_knob_angle(y0)
         out = np.empty_like(rr)
-        _inverse_kernel(rr, *self._kernel_args(), float(y0), float(q0), out)
+        _kernel(_inverse_py)(rr, *self._kernel_args(), float(y0), float(q0), out)
         return out
 
     def holding_knob_angle(self, y: float) -> float:
@@ -348,12 +375,21 @@ class Shape:
                 key = key.strip().lower()
                 if key not in ("alpha", "theta"):
                     raise ModelError(f"bad shape segment {part!r}: unknown key {key!r}")
+                if key in values:
+                    # 'alpha=90,alpha=45' is a typo for two segments, not the last value
+                    raise ModelError(f"bad shape segment {part!r}: {key} is given twice "
+                                     "(segments are separated by ';')")
                 try:
                     values[key] = float(val)
                 except ValueError:
                     raise ModelError(f"bad shape segment {part!r}: {val.strip()!r} is not a number") from None
                 if not math.isfinite(values[key]):
                     raise ModelError(f"bad shape segment {part!r}: {key} must be finite")
+                if key == "alpha" and abs(values[key]) > MAX_SEGMENT_BEND:
+                    raise ModelError(f"bad shape segment {part!r}: |alpha| <= {MAX_SEGMENT_BEND:g} deg "
+                                     f"(one full loop) is violated")
+                if key == "theta" and abs(values[key]) > MAX_PARAM:
+                    raise ModelError(f"bad shape segment {part!r}: theta beyond +-{MAX_PARAM:g} deg")
             if "alpha" not in values:
                 raise ModelError(f"bad shape segment {part!r}: alpha is missing")
             segs.append(Segment(values["alpha"], values.get("theta", 0.0)))
@@ -397,7 +433,9 @@ class Geometry:
             except (TypeError, ValueError):
                 raise ModelError(f"geometry {name} must be a number, got {v!r}") from None
             if not (math.isfinite(v) and v > 0):
-                raise ModelError(f"invalid geometry: {name} > 0 is violated ({name} = {v})")
+                raise ModelError(f"invalid geometry: {name} > 0 is violated ({name} = {v:g})")
+            if v > MAX_PARAM:
+                raise ModelError(f"invalid geometry: {name} <= {MAX_PARAM:g} mm is violated ({name} = {v:g})")
             object.__setattr__(self, name, v)
 
     def offsets(self, shape: Shape) -> tuple[float, float]:

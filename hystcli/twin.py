@@ -38,6 +38,7 @@ from .errors import DataError, ModelError
 from .filters import butter_sos, lowpass
 from .io import Run
 from .model import EffectSpec, Geometry, KnobModel, Model, Shape
+from .names import MOTIONS  # the motions simulate_motion generates (named where `--help` reads them)
 
 
 @dataclass(frozen=True)
@@ -574,8 +575,6 @@ class LiveTwin:
 # --------------------------------------------------------------------------------------------
 # one run of the paper's protocol (what `hyst simulate` does)
 # --------------------------------------------------------------------------------------------
-MOTIONS = ("sweep", "periodic", "nonperiodic")
-"""Motions of the paper's protocol that :func:`simulate_motion` generates itself."""
 
 
 def run_seed(seed: int, trial: int) -> int:

@@ -43,9 +43,10 @@ derived database and stays under the ODbL 1.0 (contents: DbCL 1.0), with the att
 - Columns: `t` (s, from 0), `q1` = input spindle angle (deg, col2 * 360/8192), `y1` = jaw angle
   (deg, col5 * 360/4000, **negated**: the jaw encoder counts against the spindle, raw gain -0.85 ..
   -0.91, and the hysteresis model needs an output that rises with its input), `c1` = back-end
-  motor current (**A**, metadata `current_unit: A`, col4).
+  motor current (mA, metadata `current_unit: mA`: col4 is in A, converted x1000).
 - **Decimated from 1 kHz to {rate:g} Hz**: zero-phase 3rd-order Butterworth anti-alias low-pass at
-  {cutoff:g} Hz, then linear interpolation; values rounded to {decimals} decimals.
+  {cutoff:g} Hz, then linear interpolation; values rounded to {decimals} decimals (the current in A,
+  before its conversion to mA).
 - Encoder zeros: `--zero {zero}`{zero_note}.
 - Metadata per run: `catheter` (endowrist-tool5 / endowrist-tool4), `motion: periodic`, `series`
   (folder), `setting` (frequency, load and pitch in words), and from the file's header line `tool`,

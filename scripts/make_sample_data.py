@@ -2,10 +2,10 @@
 """Write sample_data/: the recordings `hyst demo` runs the paper's experiment on.
 
 Seeded and deterministic: the same command writes the same bytes. Every recording comes from the
-calibrated virtual catheters (hystcli/calibration.py) through the very functions the demo uses
-when it records from the twin itself (hystcli/experiment.py: record_sweep, record_replay,
-reference_periodic, reference_nonperiodic), so `hyst demo` on these files and
-`hyst demo --simulate` give the same tables.
+calibrated virtual catheters (hystcli/calibration.py) through the very function the demo uses
+when it records from the twin itself (hystcli/experiment.py: sample_data_runs), so `hyst demo` on
+these files, `hyst demo` where there are none (an installed hyst) and `hyst demo --simulate` give
+the same tables.
 
 Usage (from the repository root):
 
@@ -19,10 +19,9 @@ import argparse
 import sys
 from pathlib import Path
 
-from hystcli.calibration import CALIBRATED_NAMES, calibrated_catheter
-from hystcli.experiment import (KNOBS, REPLAY_AMPLITUDE, REPLAY_FS, REPLAY_SPEED, SCENARIOS, SWEEP_FS,
-                                record_replay, record_sweep, reference_nonperiodic, reference_path,
-                                reference_periodic, replay_path, sweep_path)
+from hystcli.calibration import CALIBRATED_NAMES
+from hystcli.experiment import (REPLAY_AMPLITUDE, REPLAY_FS, REPLAY_SPEED, SCENARIOS, SWEEP_FS,
+                                sample_data_runs)
 from hystcli.io import atomic_write_text, write_run
 
 COMMAND = "python scripts/make_sample_data.py --out sample_data --seed 0"
@@ -83,15 +82,8 @@ def main(argv: list[str] | None = None) -> int:
         write_run(path, run)
         written.append(path)
 
-    put_run(reference_path(out, "periodic"), reference_periodic())
-    put_run(reference_path(out, "nonperiodic"), reference_nonperiodic())
-    for name in CALIBRATED_NAMES:
-        cat = calibrated_catheter(name)
-        for k in KNOBS:
-            put_run(sweep_path(out, name, k), record_sweep(cat, k, args.seed))
-        for s in SCENARIOS:
-            for k in KNOBS:
-                put_run(replay_path(out, name, s, k), record_replay(cat, s, k, args.seed))
+    for rel, run in sample_data_runs(args.seed).items():
+        put_run(out / rel, run)
     readme_path = out / "README.md"
     atomic_write_text(readme_path, readme(args.seed))
     written.append(readme_path)

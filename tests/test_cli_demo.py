@@ -13,13 +13,31 @@ runner = CliRunner()
 
 
 def test_missing_data_dir_is_one_error_line_and_writes_nothing(tmp_path, monkeypatch):
-    monkeypatch.chdir(tmp_path)  # no sample_data/ here
-    res = runner.invoke(app, ["demo", "--out", "out"])
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["demo", "--data", "nowhere", "--out", "out"])
     assert res.exit_code == 1
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and lines[0].startswith("Error: sample_data: no such data directory")
+    assert len(lines) == 1 and lines[0].startswith("Error: nowhere: no such data directory")
     assert "Traceback" not in res.output
     assert not (tmp_path / "out").exists()
+
+
+def test_demo_runs_from_a_folder_without_sample_data(tmp_path, monkeypatch):
+    # an installed hyst has no sample_data/: the demo records the same data from the twin (issue 12)
+    monkeypatch.chdir(tmp_path)
+    res = runner.invoke(app, ["demo", "--trials", "1", "--no-diagnose", "--no-figures", "--format", "json",
+                              "--out", "out"])
+    assert res.exit_code == 0, res.output
+    data = json.loads(res.stdout)
+    assert data["config"]["data"] == "twin (simulated recordings, seed 0)"  # the sample data's seed
+    assert data["config"]["input_files"] == []
+    assert "no sample_data/ in this folder" in res.stderr
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["results.json", "tables.md"]
+    # the progress shows as plain lines when stderr is not a terminal, never with an unknown total
+    steps = [ln for ln in res.stderr.splitlines() if ln.startswith("[")]
+    assert steps and steps[0].startswith("[1/") and "None" not in res.stderr
+    total = steps[0].split("/")[1].split("]")[0]
+    assert steps[-1].startswith(f"[{total}/{total}]")
 
 
 def test_out_that_is_a_file_is_an_error(tmp_path):
@@ -82,6 +100,12 @@ def test_demo_markdown_shows_paper_beside_ours(tmp_path):
 
 def test_demo_without_diagnosis_has_only_the_papers_tables(tmp_path):
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--no-diagnose", "--out",
-                              str(tmp_path / "o"), "--no-figures", "--quiet"])
+                              str(tmp_path / "o"), "--no-figures"])
     assert res.exit_code == 0, res.output
     assert "Table II" in res.stdout and "Beyond the paper" not in res.stdout
+    # -q: nothing but errors (the tables are in the --out folder)
+    res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--no-diagnose", "--out",
+                              str(tmp_path / "q"), "--no-figures", "-q"])
+    assert res.exit_code == 0, res.output
+    assert res.stdout == "" and res.stderr == ""
+    assert "Table II" in (tmp_path / "q" / "tables.md").read_text()

@@ -104,14 +104,13 @@ def test_compensate_with_the_augmented_model_uses_its_effects(files, tmp_path):
     ("mixed", "different catheters"),
     ("knobs", "no knob 2"),
     ("holdout", "no run has metadata motion"),
-    ("candidate", "unknown candidate effect"),
 ])
 def test_bad_input_fails_cleanly(files, tmp_path, case, message):
     d, paths = files
     model = d / "model.json"
     args = {"single": [paths[0]], "no_y": [paths[0], d / "no_y.csv"], "mixed": [paths[0], d / "other.csv"],
             "knobs": [paths[0], d / "two_knobs.csv"], "holdout": [*paths, "--holdout", "motion=spiral"],
-            "candidate": [*paths, "--candidates", "wobble"]}[case]
+            }[case]
     if case == "knobs":
         one = tmp_path / "one.json"
         save_model(one, Model({1: CAT.knobs[1]}, CAT.geometry))
@@ -123,6 +122,31 @@ def test_bad_input_fails_cleanly(files, tmp_path, case, message):
     assert len(lines) == 1 and lines[0].startswith("Error: ") and message in lines[0]
     assert "Traceback" not in res.output
     assert not out.exists() and not (tmp_path / "aug.json").exists()
+
+
+@pytest.mark.parametrize("case, message", [
+    ("candidate", "unknown effect 'wobble'"),
+    ("holdout", "expected key=value"),
+    ("same_output", "--output and --model-out name the same file"),
+    ("same_plot", "--output and --plot name the same file"),
+    ("same_run", "are the same file"),
+])
+def test_usage_errors_found_after_parsing_exit_2(files, tmp_path, case, message):
+    # issue 12: option values found wrong after parsing are usage errors (exit 2), with one
+    # Error: line, and nothing is written (the report is not lost under the model, nor the reverse)
+    d, paths = files
+    out, aug = tmp_path / "report.json", tmp_path / "aug.json"
+    args = {"candidate": [*paths, "--candidates", "wobble", "-o", out],
+            "holdout": [*paths, "--holdout", "foo", "-o", out],
+            "same_output": [*paths, "-o", out, "--model-out", out],
+            "same_plot": [*paths, "-o", out, "--plot", out],
+            "same_run": [paths[0], paths[0], "-o", out]}[case]
+    res = invoke("diagnose", "--model", d / "model.json", *args)
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert len(errors) == 1 and message in errors[0], res.output
+    assert "Traceback" not in res.output
+    assert not out.exists() and not aug.exists()
 
 
 def test_usage_errors_and_inputs_are_protected(files):

@@ -41,10 +41,12 @@ def test_preset_import_reports_what_was_done(tmp_path):
     res = invoke("import", LOAD41, "--preset", "mrdlab", "-o", out)
     assert res.exit_code == 0, res.output
     run = read_run(out, require=("q1", "y1", "c1"))
-    # raw row "1.990,63.00,1972.00,0.121,817.00,...": q1 = 63*360/8192, y1 = -(817*0.09), c1 = 0.121 A
+    # raw row "1.990,63.00,1972.00,0.121,817.00,...": q1 = 63*360/8192, y1 = -(817*0.09),
+    # c1 = 0.121 A = 121 mA
     assert run["q1"][1990] == 2.7685546875
     assert run["y1"][1990] == pytest.approx(-73.53, abs=1e-12)
-    assert run.meta["current_unit"] == "A" and run.meta["load_pct"] == "20.00"
+    assert run["c1"][1990] == pytest.approx(121.0, abs=1e-12)
+    assert run.meta["current_unit"] == "mA" and run.meta["load_pct"] == "20.00"
     text = res.stdout
     assert "rows 6000 read, 6000 written" in text
     assert "1000 Hz" in text
@@ -57,6 +59,10 @@ def test_user_map_equals_preset(tmp_path):
     assert invoke("import", LOAD41, "--preset", "mrdlab", "-o", a).exit_code == 0
     res = invoke("import", LOAD41, "--map", "t=1,q1=2:360/8192,y1=5:0.09,c1=4", "--comment", "%",
                  "--flip-output", "-o", b)
+    assert res.exit_code == 0, res.output
+    assert "states no current unit: the current is taken to be in mA" in res.stderr
+    res = invoke("import", LOAD41, "--map", "t=1,q1=2:360/8192,y1=5:0.09,c1=4", "--comment", "%",
+                 "--flip-output", "--meta", "current_unit=A", "-o", b)
     assert res.exit_code == 0, res.output
     ra, rb = read_run(a), read_run(b)
     for name in ("t", "q1", "y1", "c1"):
@@ -71,6 +77,17 @@ def test_map_overrides_preset_column(tmp_path):
     run = read_run(out)
     assert run["c1"][1990] == pytest.approx(121.0)  # 0.121 A = 121 mA
     assert run.meta["current_unit"] == "mA"
+
+
+@pytest.mark.parametrize("unit, expected", [("uA", 0.000121), ("mA", 0.121), ("A", 121.0)])
+def test_current_is_written_in_ma_from_the_unit_the_log_states(tmp_path, unit, expected):
+    out = tmp_path / "c.csv"
+    res = invoke("import", LOAD41, "--preset", "mrdlab", "--meta", f"current_unit={unit}", "-o", out)
+    assert res.exit_code == 0, res.output
+    run = read_run(out)
+    assert run["c1"][1990] == pytest.approx(expected, rel=1e-12) and run.meta["current_unit"] == "mA"
+    res = invoke("import", LOAD41, "--preset", "mrdlab", "--meta", "current_unit=kA", "-o", out)
+    assert_error(res, "current_unit 'kA' is not one of A, mA, uA")
 
 
 def test_show_mapping_round_trips_through_mapping_file(tmp_path):
@@ -128,19 +145,33 @@ def test_out_dir_many_files_and_json(tmp_path):
 
 @pytest.mark.parametrize("args, fragment", [
     (["--map", "t=1,q1=11"], "reads column 11"),
+    (["--preset", "mrdlab", "--meta", "catheter=x-{serial}"], "{serial}"),
+])
+def test_mappings_the_file_does_not_fit_exit_1_nothing_written(tmp_path, args, fragment):
+    out = tmp_path / "out.csv"
+    res = invoke("import", LOAD41, *args, "--comment", "%", "-o", out)
+    assert_error(res, fragment)
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("args, fragment", [
     (["--map", "t=1,w1=2"], "unknown target column 'w1'"),
     (["--map", "t=1,q1=2:abc"], "'abc' is not a number"),
     (["--map", "t=1,q1=2:0"], "scale 0"),
     (["--preset", "nope"], "unknown preset 'nope'"),
     (["--map", "q1=2"], "no time column"),
-    (["--preset", "mrdlab", "--meta", "catheter=x-{serial}"], "{serial}"),
     (["--preset", "mrdlab", "--meta", "bad key=1"], "expected key=value"),
     (["--preset", "mrdlab", "--meta-from-header", "(?P<x"], "not a valid regular expression"),
+    (["--preset", "mrdlab", "--sep", ""], "separator"),
 ])
-def test_bad_mappings_exit_1_nothing_written(tmp_path, args, fragment):
+def test_malformed_mapping_options_are_usage_errors(tmp_path, args, fragment):
+    # a malformed option value is the user's typing (exit 2, issue 12), not bad data
     out = tmp_path / "out.csv"
     res = invoke("import", LOAD41, *args, "--comment", "%", "-o", out)
-    assert_error(res, fragment)
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert len(errors) == 1 and fragment in errors[0], res.output
+    assert "Traceback" not in res.output
     assert not out.exists()
 
 
@@ -148,7 +179,7 @@ def test_bad_mappings_exit_1_nothing_written(tmp_path, args, fragment):
     (b"", "empty file"),
     (b"\x1f\x8b\x08\x00broken", "corrupt gzip"),
     (b"% header\n0.0,1,2,3,4\n0.001,1,2,oops,4\n", "'oops' is not a number"),
-    (b"% header\n0.0,1,2,3,4\n0.0,1,2,3,4\n", "time repeats at line 3"),
+    (b"% header\n0.0,1,2,3,4\n0.0,1,2,3,4\n", "time repeats at line 3 (0.0 then 0.0;"),
 ])
 def test_bad_files_exit_1_keep_existing_output(tmp_path, content, fragment):
     raw = tmp_path / "raw.txt"

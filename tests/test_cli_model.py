@@ -81,6 +81,36 @@ def test_predict_keeps_the_measurement_beside_the_prediction(files):
     np.testing.assert_allclose(p["y1"], expected, atol=1e-12)
 
 
+def test_predict_summary_in_every_format(files):
+    args = ("predict", files / "sweep.csv", "--model", files / "model.json", "-o", files / "p.csv")
+    s = read_run(files / "sweep.csv")
+    res = invoke(*args, "--format", "json")
+    assert res.exit_code == 0, res.output
+    row = json.loads(res.stdout)["rows"][0]
+    p = read_run(files / "p.csv")
+    assert row["knob"] == 1 and row["samples"] == len(s)
+    # the summary's RMSE is the one of the file it wrote, prediction against measurement
+    assert row["rmse_vs_measured"] == pytest.approx(float(np.sqrt(np.mean((p["y1"] - s["y1"]) ** 2))))
+    assert invoke(*args, "--format", "csv").stdout.startswith("knob,samples,y_min,y_max,rmse_vs_measured")
+    assert "| knob |" in invoke(*args, "-f", "markdown").stdout
+    assert "RMSE vs measured" in invoke(*args).stdout
+    assert invoke(*args, "-q").stdout == ""
+
+
+@pytest.mark.parametrize("fmt, expected", [
+    ("table", "knob 1: offset +6.000 -> +0.000 deg"),
+    ("csv", "knob,offset_before,offset_after\n1,6.0,"),
+    ("markdown", "| knob | offset before | offset after |"),
+    ("latex", "\\begin{tabular}"),
+    ("json", '"offset_after": -6.0'),
+])
+def test_rotate_shift_formats(files, fmt, expected):
+    res = invoke("rotate-shift", "--model", files / "model.json", "--degrees", "90", "-o", files / "r.json",
+                 "--format", fmt)
+    assert res.exit_code == 0, res.output
+    assert expected in res.stdout
+
+
 def test_compensate_warns_outside_the_identified_range(files):
     res = invoke("identify", files / "sweep.csv", "-o", files / "id.json", "-q")
     assert res.exit_code == 0, res.output

@@ -1,6 +1,8 @@
 """`hyst simulate` through the command line."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from typer.testing import CliRunner
@@ -71,18 +73,24 @@ def test_commands_take_q_r_and_controller_from_the_file(tmp_path):
     (["--effect", "stiction"], "unknown effect 'stiction'"),
     (["--effect", "creep:fraction=2"], "parameter fraction = 2 is outside its valid range"),
     (["--effect", "rate:speed=1"], "unknown parameter 'speed'"),
-    (["--shape", "alpha=ninety"], "bad shape segment"),
+    (["--shape", "alpha=ninety"], "'ninety' is not a number"),
+    (["--shape", "alpha=abc"], "'abc' is not a number"),
+    (["--shape", "alpha=1e9"], "|alpha| <= 360 deg"),
+    (["--shape", "alpha=90,alpha=45"], "alpha is given twice"),
     (["--catheter", "ice-z"], "unknown virtual catheter"),
     (["--motion", "zigzag"], "unknown motion"),
+    (["--knobs", "3"], "expected 1, 2 or 1,2"),
+    (["--rotation", "1e309"], "must be a finite number"),
     (["--controller", "comp"], "needs the commands"),
-    (["--knobs", "3"], "bad --knobs"),
 ])
-def test_bad_input_is_one_error_line_and_no_file(tmp_path, args, message):
+def test_bad_option_is_a_usage_error_with_one_error_line_and_no_file(tmp_path, args, message):
+    # a bad option value is the user's typing: exit 2 like typer's own usage errors (issue 12)
     out = tmp_path / "out.csv"
     res = _invoke(*args, "-o", str(out))
-    assert res.exit_code == 1
-    assert res.output.startswith("Error: ") and message in res.output
-    assert "Traceback" not in res.output and len(res.output.strip().splitlines()) == 1
+    assert res.exit_code == 2, res.output
+    errors = [ln for ln in res.output.splitlines() if ln.startswith("Error")]
+    assert len(errors) == 1 and message in errors[0], res.output
+    assert "Traceback" not in res.output
     assert not out.exists()
 
 
@@ -95,3 +103,15 @@ def test_commands_missing_a_column(tmp_path):
     cmds.write_text("t,q1\n0,0\n0.01,1\n")
     res = _invoke("--commands", str(cmds), "--knobs", "1,2", "-o", str(out))
     assert res.exit_code == 1 and "missing column 'q2'" in res.output and not out.exists()
+
+
+def test_format_prints_what_was_simulated(tmp_path):
+    out = tmp_path / "run.csv"
+    res = _invoke("--shape", "alpha=45", "--format", "json", "-o", str(out))
+    assert res.exit_code == 0, res.output
+    summary = json.loads(res.stdout)
+    assert summary["output"] == str(out) and summary["samples"] == len(read_run(out))
+    assert summary["shape"] == "alpha=45,theta=0" and summary["knobs"] == [1]
+    res = _invoke("--format", "csv", "-o", str(out))
+    assert res.stdout.startswith("key,value\n") and "catheter,ice-a" in res.stdout
+    assert _invoke("-o", str(out)).stdout == ""  # the table format says it on stderr

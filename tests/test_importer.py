@@ -40,17 +40,18 @@ def test_preset_columns_and_units_by_hand(load41):
     assert list(run.columns) == ["t", "q1", "y1", "c1"]
     assert len(run) == 6000 and rep.rows_read == 6000 and rep.rows_dropped == 0
     # raw line 10 (first data row): "0.000,0.00,-874.00,-0.045,880.00,..."
-    #   t = 0.000 s; q1 = 0 * 360/8192 = 0; y1 = -(880 * 360/4000) = -79.2 (flipped); c1 = -0.045 A
+    #   t = 0.000 s; q1 = 0 * 360/8192 = 0; y1 = -(880 * 360/4000) = -79.2 (flipped);
+    #   c1 = -0.045 A = -45 mA (a run's current is in mA)
     assert run["t"][0] == 0.0 and run["q1"][0] == 0.0
     assert run["y1"][0] == pytest.approx(-79.2, abs=1e-12)
-    assert run["c1"][0] == pytest.approx(-0.045, abs=1e-15)
+    assert run["c1"][0] == pytest.approx(-45.0, abs=1e-12)
     # raw line 2000 (data row index 1990): "1.990,63.00,1972.00,0.121,817.00,..."
     #   t = 1.990 s (seconds despite the [ms] label); q1 = 63 * 360/8192 = 2.7685546875 deg;
-    #   y1 = -(817 * 0.09) = -73.53 deg; c1 = 0.121 A
+    #   y1 = -(817 * 0.09) = -73.53 deg; c1 = 0.121 A = 121 mA
     assert run["t"][1990] == pytest.approx(1.990, abs=1e-12)
     assert run["q1"][1990] == 2.7685546875
     assert run["y1"][1990] == pytest.approx(-73.53, abs=1e-12)
-    assert run["c1"][1990] == pytest.approx(0.121, abs=1e-15)
+    assert run["c1"][1990] == pytest.approx(121.0, abs=1e-12)
     # last raw row "5.999,60.00,..." -> 6 s at 1 kHz
     assert run["t"][-1] == pytest.approx(5.999, abs=1e-12)
     assert rep.rate_in == pytest.approx(1000.0, rel=1e-9)
@@ -70,7 +71,8 @@ def test_preset_metadata_from_header(load41):
     assert meta["condition"] == "20.00"
     assert meta["spindle"] == "left"
     assert meta["motion"] == "periodic"
-    assert meta["current_unit"] == "A"
+    assert meta["current_unit"] == "mA"  # the log's A, converted (the import line says so)
+    assert "current in A converted to mA (x1000)" in meta["import"]
     assert "output flipped" in meta["import"] and "zero none" in meta["import"]
     # no ReadME beside the load_freq excerpt: no pitch, and no warning about it
     assert "pitch_deg" not in meta

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import json
 import os
+import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,7 +12,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import DataError, ModelError
-from hystcli.io import (Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
+from hystcli.io import (MAX_ABS_VALUE, Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
                         parse_run, read_run, save_model, write_run)
 from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
 
@@ -63,7 +65,8 @@ def test_missing_required_column_and_file(tmp_path):
         read_run(tmp_path / "bin.csv")
 
 
-finite = st.floats(allow_nan=False, allow_infinity=False, width=64)
+# any value a run may hold: finite and within the plausibility bound of io.MAX_ABS_VALUE
+finite = st.floats(-MAX_ABS_VALUE, MAX_ABS_VALUE, allow_nan=False, allow_infinity=False, width=64)
 
 
 @settings(max_examples=100, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
@@ -180,3 +183,93 @@ def test_refuses_to_overwrite_an_input(tmp_path):
 def test_format_run_text():
     text = format_run(Run({"t": [0.0, 0.5], "q1": [0.1, -2.0]}, {"catheter": "x"}))
     assert text == "# catheter: x\nt,q1\n0.0,0.1\n0.5,-2.0\n"
+
+
+# --------------------------------------------------------------------------------------------
+# issue 12: files follow the umask, several outputs all or none, the caller's arrays untouched
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("umask, mode", [(0o022, 0o644), (0o027, 0o640), (0o077, 0o600), (0o002, 0o664)])
+def test_output_files_follow_the_umask(tmp_path, umask, mode):
+    from hystcli.io import all_or_none
+
+    old = os.umask(umask)
+    try:
+        write_run(tmp_path / "a.csv", Run({"t": [0.0, 1.0]}))
+        save_model(tmp_path / "m.json", sample_model())
+        with all_or_none() as out:
+            out.write_text(tmp_path / "b.txt", "b")
+    finally:
+        os.umask(old)
+    for name in ("a.csv", "m.json", "b.txt"):
+        assert (tmp_path / name).stat().st_mode & 0o777 == mode, name
+
+
+def test_several_outputs_are_written_all_or_none(tmp_path):
+    from hystcli.io import all_or_none
+
+    (tmp_path / "report.json").write_text("old report")
+    with pytest.raises(RuntimeError, match="plot failed"):
+        with all_or_none() as out:
+            out.write_text(tmp_path / "report.json", "new report")
+            out.write_text(tmp_path / "model.json", "new model")
+            raise RuntimeError("plot failed")  # e.g. the third output cannot be drawn
+    assert sorted(os.listdir(tmp_path)) == ["report.json"]  # no new file, no temporary file
+    assert (tmp_path / "report.json").read_text() == "old report"
+    with all_or_none() as out:
+        out.write_text(tmp_path / "report.json", "new report")
+        path = out.path(tmp_path / "fig.png")
+        assert path.endswith(".png") and "fig.png" in path  # writers that choose by the suffix
+        Path(path).write_bytes(b"png")
+        assert not (tmp_path / "fig.png").exists()  # nothing lands before the end
+    assert (tmp_path / "report.json").read_text() == "new report"
+    assert (tmp_path / "fig.png").read_bytes() == b"png"
+    assert sorted(os.listdir(tmp_path)) == ["fig.png", "report.json"]
+
+
+def test_an_error_names_the_target_not_the_temporary_file(tmp_path):
+    from hystcli.io import all_or_none
+
+    with pytest.raises(DataError) as err:
+        with all_or_none() as out:
+            tmp = out.path(tmp_path / "fig.png")
+            raise DataError(f"{tmp}: cannot draw")  # what a writer given the temporary path says
+    assert str(err.value) == f"{tmp_path / 'fig.png'}: cannot draw"
+    with pytest.raises(DataError, match="the folder .* does not exist"):
+        write_run(tmp_path / "nope" / "r.csv", Run({"t": [0.0]}))
+    with pytest.raises(DataError, match="is a directory"):
+        write_run(tmp_path, Run({"t": [0.0]}))
+    assert os.listdir(tmp_path) == []
+
+
+def test_run_does_not_freeze_the_callers_array():
+    q = np.array([0.0, 1.0, 2.0])
+    run = Run({"t": [0.0, 0.1, 0.2], "q1": q})
+    q[0] = 5.0  # still the caller's to change ...
+    assert q.flags.writeable
+    assert run["q1"][0] == 0.0  # ... without changing the run
+    with pytest.raises(ValueError):
+        run["q1"][0] = 1.0  # the run's own copy is read-only
+    # a run's read-only arrays are shared by the runs made from it, not copied again
+    assert run.with_meta(x=1)["q1"] is run["q1"]
+
+
+def test_a_byte_order_mark_is_not_part_of_the_first_column(tmp_path):
+    (tmp_path / "bom.csv").write_bytes(b"\xef\xbb\xbf" + GOOD.encode())
+    assert read_run(tmp_path / "bom.csv").meta["catheter"] == "ice-a"
+    assert list(parse_run("\ufeff" + GOOD).columns) == ["t", "q1", "y1"]
+
+
+@pytest.mark.parametrize("header, hint", [("t;q1;y1", "--sep ';' --skip 1 --map t=1,q1=2,y1=3"),
+                                          ("t\tq1\tc1", "--sep tab --skip 1 --map t=1,q1=2,c1=3")])
+def test_a_file_with_another_separator_gets_the_import_command(header, hint):
+    with pytest.raises(DataError, match=re.escape(hint)):
+        parse_run(f"{header}\n0;0;0\n", source="x.csv")
+
+
+def test_values_beyond_the_plausible_are_refused_on_read_and_on_write(tmp_path):
+    with pytest.raises(DataError, match=r"column 'y1', line 3: 1e\+308 is beyond"):
+        parse_run("t,q1,y1\n0,0,0\n0.1,1,1e308\n")
+    # an unknown column is kept as it is (hyst computes nothing on it)
+    assert parse_run("t,serial\n0,1e300\n")["serial"][0] == 1e300
+    with pytest.raises(DataError, match="refusing to write column 'c1', sample 0"):
+        format_run(Run({"t": [0.0], "c1": [2e10]}))

@@ -352,3 +352,19 @@ def test_figure_is_a_png():
     assert evaluation_figure(runs) == png  # same runs, same bytes
     with pytest.raises(DataError):
         evaluation_figure(runs, "gif")
+
+
+def test_figure_legend_names_every_controller_of_every_column():
+    # Fig. 6's first column is the straight shaft, where Compensation+Shift and the diagnosed
+    # controller do not run: the legend must still name them (issue 12)
+    runs = [make_run([1, 0, 0, 0], controller=c, shape="straight") for c in ("none", "comp")]
+    runs += [make_run([1, 0, 0, 0], controller=c, shape="alpha=90,theta=0")
+             for c in ("none", "comp", "comp+shift", "comp+shift+diag")]
+    svg = evaluation_figure(runs, "svg").decode()
+    legend = svg[svg.index('<g id="legend_1">'):]
+    for label in ("No Compensation", "Compensation-Only", "Compensation+Shift", "Compensation+Shift+Diagnosis",
+                  "ground truth (r)"):
+        assert f"<!-- {label} -->" in legend, label
+    # and the axes carry their units
+    for label in ("time (s)", "output angle y1 (deg)", "input angle r1 (deg)"):
+        assert f"<!-- {label} -->" in svg

@@ -9,6 +9,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import ModelError
+from hystcli import model as model_mod
 from hystcli.model import Geometry, KnobModel, Model, Shape, rotate_offsets
 
 # DESIGN.md section 6's example knob.
@@ -169,6 +170,8 @@ def test_inverse_holds_when_reference_is_constant():
      "f_up <= f_dn everywhere"),
     (dict(d_pos=float("nan")), "finite"),
     (dict(omega="abc"), "must be a number"),
+    (dict(d_pos=1e308), "d_pos = 1e+308 is beyond"),  # a corrupt file, not a knob angle (issue 12)
+    (dict(offset=-2e6), "offset = -2e+06 is beyond"),
 ])
 def test_invalid_parameters_name_the_violated_condition(change, condition):
     p = dict(EXAMPLE)
@@ -189,7 +192,8 @@ def test_shape_offset_by_hand():
     assert g.offsets(Shape.parse("straight")) == (0.0, 0.0)
 
 
-@pytest.mark.parametrize("text", ["alpha", "alpha=x", "beta=3", "theta=30", "alpha=inf"])
+@pytest.mark.parametrize("text", ["alpha", "alpha=x", "beta=3", "theta=30", "alpha=inf", "alpha=1e9",
+                                  "alpha=90,alpha=45", "alpha=90,theta=0,theta=5"])
 def test_bad_shape_text(text):
     with pytest.raises(ModelError, match="bad shape segment"):
         Shape.parse(text)
@@ -225,3 +229,34 @@ def test_shifted_edges():
     assert k.shifted_d_pos == pytest.approx(14.1)
     assert k.shifted_d_neg == pytest.approx(-3.7)
     assert k.shifted(1.0).offset == 6.0
+
+
+# --------------------------------------------------------------------------------------------
+# the compiled kernels (issue 12): NaN refused, the numba and plain-Python paths agree
+# --------------------------------------------------------------------------------------------
+@pytest.mark.parametrize("bad", [np.nan, np.inf, -np.inf])
+def test_forward_and_inverse_refuse_non_finite_input_naming_the_sample(bad):
+    knob = KnobModel(**EXAMPLE)
+    x = np.array([0.0, 5.0, bad, 1.0])
+    # without the check NaN would pass the clamp silently: every comparison with it is false
+    with pytest.raises(ModelError, match="forward: knob angles must be finite, sample 2 is"):
+        knob.forward(x)
+    with pytest.raises(ModelError, match="inverse: desired tip angles must be finite, sample 2 is"):
+        knob.inverse(x)
+    with pytest.raises(ModelError, match="y0"):
+        knob.forward(np.zeros(3), y0=float(bad))
+
+
+@settings(max_examples=100, deadline=None)
+@given(knob=valid_knobs(), seed=st.integers(0, 2**32 - 1), y0=st.floats(-10, 10))
+def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
+    rng = np.random.default_rng(seed)
+    x = np.cumsum(rng.normal(0, 4, 200))
+    args = knob._kernel_args()
+    for py, data, extra in ((model_mod._forward_py, x, (y0,)),
+                            (model_mod._inverse_py, x, (y0, knob.holding_knob_angle(y0)))):
+        compiled, plain = np.empty_like(data), np.empty_like(data)
+        last_c = model_mod._kernel(py)(data, *args, *extra, compiled)
+        last_p = py(data, *args, *extra, plain)
+        # same operations in the same order: bit for bit, not approximately
+        assert np.array_equal(compiled, plain) and last_c == last_p

@@ -2,19 +2,26 @@
 
 Command modules (``hystcli/cli/*_cmds.py``) register their commands with :func:`command`, which
 wraps each one so that any :class:`~hystcli.errors.HystError` becomes one line ``Error: ...`` on
-stderr and exit code 1, and Ctrl-C exit code 130, never a traceback. Usage errors are typer's and
-exit with code 2.
+stderr and exit code 1, and Ctrl-C exit code 130, never a traceback. Usage errors exit with code 2:
+typer's own, and those a command finds after parsing (:func:`usage_error`,
+:func:`option_errors`). Long work reports through :func:`progress`.
+
+This module is imported by ``hyst --help``: it imports typer and nothing heavy (rich only when a
+progress bar is drawn on a terminal).
 """
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import sys
+import time
 from enum import Enum
 from pathlib import Path
-from typing import Annotated, Any, Callable, List, Optional
+from typing import Annotated, Any, Callable, Iterator, List, NoReturn, Optional
 
 import typer
+from typer.core import TyperArgument, TyperCommand
 
 from .. import __version__
 from ..errors import HystError
@@ -23,9 +30,10 @@ app = typer.Typer(
     name="hyst",
     help="Shape-adaptive hysteresis calibration and evaluation for tendon-driven catheter robots.",
     no_args_is_help=True,
-    add_completion=False,
+    add_completion=True,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
+    context_settings={"help_option_names": ["--help", "-h"]},
 )
 
 
@@ -37,16 +45,121 @@ def _version(value: bool) -> None:
 
 @app.callback()
 def _root(
-    version: Annotated[bool, typer.Option("--version", callback=_version, is_eager=True,
+    version: Annotated[bool, typer.Option("--version", "-V", callback=_version, is_eager=True,
                                           help="Print the version and exit.")] = False,
 ) -> None:
     """hyst: identify, detect shift, compensate, evaluate and diagnose catheter hysteresis."""
 
 
-def fail(message: str, code: int = 1) -> None:
+def first_line(exc: BaseException) -> str:
+    """The message of an error as one line (its first), or its type's name when it has none."""
+    text = str(exc)
+    return text.splitlines()[0] if text.strip() else type(exc).__name__
+
+
+def fail(message: str, code: int = 1) -> NoReturn:
     """Print ``Error: message`` on stderr and exit with ``code``."""
     typer.echo(f"Error: {message}", err=True)
     raise typer.Exit(code)
+
+
+def usage_error(message: str, param: str | None = None) -> NoReturn:
+    """A usage error found after parsing (a bad option value, options that conflict): exit 2.
+
+    Rendered by typer like its own usage errors (usage line, then one line ``Error: ...``).
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, e.g. ``"must be a positive number, got -1"``.
+    param : str, optional
+        The option(s) at fault as the user typed them, e.g. ``"--shape"``.
+    """
+    raise typer.BadParameter(message, param_hint=param)
+
+
+@contextlib.contextmanager
+def option_errors(param: str) -> Iterator[None]:
+    """Turn a :class:`HystError` raised while reading an option's value into a usage error.
+
+    The core's parsers (shapes, effects, key=value pairs) raise data errors; on the command line
+    a bad option value is the user's typing, not bad data, so it exits 2.
+    """
+    try:
+        yield
+    except HystError as exc:
+        usage_error(first_line(exc), param)
+
+
+@contextlib.contextmanager
+def about(*paths: Optional[Path]) -> Iterator[None]:
+    """Name the input file in a hyst error whose message names none of ``paths``.
+
+    Errors found deep in the core (an identification that fails, a filter that refuses a sample
+    rate) do not know which file the data came from; the command does.
+    """
+    try:
+        yield
+    except HystError as exc:
+        names = [str(p) for p in paths if p is not None]
+        message = first_line(exc)
+        if names and not any(name in message for name in names):
+            raise type(exc)(f"{names[0]}: {message}") from None
+        raise
+
+
+def distinct_outputs(**paths: Optional[Path]) -> None:
+    """Usage error (exit 2) when two output options name the same file (one would overwrite the
+    other, e.g. ``-o X --plot X`` would write the report into the figure)."""
+    seen: dict[Path, str] = {}
+    for option, path in paths.items():
+        if path is None:
+            continue
+        key = Path(path).resolve()
+        if key in seen:
+            usage_error(f"{seen[key]} and {option} name the same file {path}", f"{seen[key]} / {option}")
+        seen[key] = option
+
+
+def distinct_inputs(paths: List[Path], what: str = "RUN.csv") -> None:
+    """Usage error (exit 2) when one input file is given twice: its run would count twice in every
+    mean and std (refused rather than dropped, since a repeated name is usually a typo for another)."""
+    seen: dict[Path, Path] = {}
+    for p in paths:
+        key = Path(p).resolve()
+        if key in seen:
+            usage_error(f"{seen[key]} and {p} are the same file; give each run once", what)
+        seen[key] = p
+
+
+def prints(fmt: Any, quiet: bool) -> bool:
+    """Whether a command prints its result on stdout: always for a machine format asked for with
+    ``--format`` (json, csv, ...), the table unless ``--quiet``."""
+    return not quiet or getattr(fmt, "value", fmt) != "table"
+
+
+class _Argument(TyperArgument):
+    def display_type_rich(self, ctx: Any) -> str | None:
+        # an argument with a metavar (RUN.csv) needs no Python type beside it (<list[Path]>)
+        return None if self.metavar is not None else super().display_type_rich(ctx)
+
+
+class _Command(TyperCommand):
+    """Typer's command with classic help: ``hyst evaluate [OPTIONS] RUN.csv...`` in the usage line
+    (typer writes a required argument as ``{RUN.csv}``), arguments in capitals, and no Python
+    type (``<list[Path]>``) beside an argument's metavar."""
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        for param in self.params:
+            if type(param) is TyperArgument:
+                param.__class__ = _Argument  # the same object, one method changed
+                if param.metavar is None:  # click's convention: an argument in capitals
+                    param.metavar = (param.name or "ARG").upper()
+
+    def collect_usage_pieces(self, ctx: Any) -> list[str]:
+        return [piece[1:].replace("}", "", 1) if piece.startswith("{") else piece
+                for piece in super().collect_usage_pieces(ctx)]
 
 
 def command(name: str | None = None, **kwargs: Any) -> Callable:
@@ -58,13 +171,13 @@ def command(name: str | None = None, **kwargs: Any) -> Callable:
             try:
                 return func(*args, **kw)
             except HystError as exc:
-                fail(str(exc).splitlines()[0] if str(exc) else type(exc).__name__)
+                fail(first_line(exc))
             except KeyboardInterrupt:
                 fail("interrupted", 130)
             except OSError as exc:
                 fail(f"{exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}")
 
-        return app.command(name=name, **kwargs)(wrapper)
+        return app.command(name=name, cls=_Command, **kwargs)(wrapper)
 
     return decorator
 
@@ -82,7 +195,9 @@ class OutputFormat(str, Enum):
 
 FormatOpt = Annotated[OutputFormat, typer.Option("--format", "-f", help="Output format on stdout.")]
 SeedOpt = Annotated[int, typer.Option("--seed", help="Seed of every random draw (same seed, same bytes).")]
-QuietOpt = Annotated[bool, typer.Option("--quiet", "-q", help="Print nothing but errors.")]
+QuietOpt = Annotated[bool, typer.Option(
+    "--quiet", "-q", help="Print nothing but errors (output asked for with --format json/csv/... still "
+                          "goes to stdout).")]
 OutOpt = Annotated[Path, typer.Option("--output", "-o", help="Output file (written atomically).")]
 ModelOpt = Annotated[Path, typer.Option("--model", "-m", help="Model JSON file (from `hyst identify`).")]
 PlotOpt = Annotated[Optional[Path], typer.Option("--plot", help="Also draw a figure to this PNG file.")]
@@ -127,6 +242,13 @@ def _json_default(obj: Any) -> Any:
     return str(obj)
 
 
+def echo_table(table: Any, fmt: "OutputFormat | str", digits: int = 2) -> None:
+    """A :class:`hystcli.metrics.Table` on stdout in any ``--format``."""
+    from ..metrics import format_table
+
+    typer.echo(format_table(table, getattr(fmt, "value", fmt), digits), nl=False)
+
+
 def warn(message: str) -> None:
     """A warning on stderr (never on stdout, which may carry machine-readable output)."""
     typer.echo(f"Warning: {message}", err=True)
@@ -139,4 +261,70 @@ def info(message: str, quiet: bool = False) -> None:
 
 
 def stderr_is_tty() -> bool:
+    """Whether stderr is a terminal (rich progress bars) rather than a pipe or file (plain lines)."""
     return sys.stderr.isatty()
+
+
+ProgressFn = Callable[..., None]
+"""``update(message, done=None, total=None)``: what :func:`progress` yields."""
+
+
+@contextlib.contextmanager
+def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]:
+    """Progress of long work on stderr: a rich bar on a terminal, plain lines otherwise.
+
+    Yields ``update(message, done=None, total=None)``, to call after each step. On a terminal
+    the bar appears at the first update (so it never shows an unknown total) and disappears at
+    the end. Piped or redirected, each update is a line ``[done/total] message``, at most one
+    per ``interval`` seconds besides the first and the last step, so a log shows the work moving
+    without one line per step. With ``quiet`` nothing is shown.
+
+    Examples
+    --------
+    >>> with progress(quiet) as update:          # doctest: +SKIP
+    ...     for i, item in enumerate(items, 1):
+    ...         work(item)
+    ...         update(f"did {item}", i, len(items))
+    """
+    if quiet:
+        yield lambda message, done=None, total=None: None
+        return
+    if stderr_is_tty():
+        with _rich_progress() as update:
+            yield update
+        return
+    last = [-float("inf")]
+
+    def update(message: str, done: int | None = None, total: int | None = None) -> None:
+        now = time.monotonic()
+        edge = done is not None and (done <= 1 or (total is not None and done >= total))
+        if done is None or edge or now - last[0] >= interval:
+            last[0] = now
+            count = "" if done is None else f"[{done}/{total}] " if total else f"[{done}] "
+            typer.echo(f"{count}{message}", err=True)
+
+    yield update
+
+
+@contextlib.contextmanager
+def _rich_progress() -> Iterator[ProgressFn]:
+    from rich.console import Console
+    from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+
+    bar = Progress(TextColumn("{task.description:<44}"), BarColumn(),
+                   TextColumn("{task.fields[count]}"), TimeElapsedColumn(),
+                   console=Console(stderr=True), transient=True)
+    task = None
+
+    def update(message: str, done: int | None = None, total: int | None = None) -> None:
+        nonlocal task
+        count = "" if done is None else f"{done}/{total}" if total else str(done)
+        if task is None:
+            bar.start()
+            task = bar.add_task(message[:44], total=total, completed=done or 0, count=count)
+        bar.update(task, description=message[:44], completed=done or 0, total=total, count=count)
+
+    try:
+        yield update
+    finally:
+        bar.stop()

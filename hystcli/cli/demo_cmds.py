@@ -8,13 +8,12 @@ from __future__ import annotations
 import time
 from enum import Enum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Optional
 
 import typer
 
-from .. import experiment
 from ..errors import DataError
-from .app import QuietOpt, SeedOpt, command, info, stderr_is_tty
+from .app import QuietOpt, SeedOpt, command, info, progress, prints, usage_error
 
 
 class DemoFormat(str, Enum):
@@ -33,16 +32,19 @@ class DemoFormat(str, Enum):
         "(comp ignores the shift, comp+shift uses the detected one), run each controller (none, "
         "comp, comp+shift) on the twin for every trial, evaluate PTPE and RMSE. Beyond the paper: "
         "diagnose each catheter's Compensation+Shift runs (hyst diagnose), compensate with the "
-        "augmented model and set the result beside the paper's (--no-diagnose leaves it out). Reads the "
-        "recordings from --data (sample_data/, made by scripts/make_sample_data.py) and writes "
-        "results.json, tables.md and figures like the paper's Figs. 6 and 7 into --out.\n\n"
+        "augmented model and set the result beside the paper's (--no-diagnose leaves it out).\n\n"
+        "Reads the recordings from --data, by default sample_data/ when the current folder has "
+        "one (the repository root); elsewhere (an installed hyst) it records the same data from "
+        "the twin first, byte for byte what scripts/make_sample_data.py wrote into sample_data/. "
+        "Writes results.json, tables.md and figures like the paper's Figs. 6 and 7 into --out.\n\n"
         "Example:\n\n"
         "    hyst demo --out demo_out --format markdown"
     ),
 )
 def demo(
-    data: Annotated[Path, typer.Option("--data", help="Data directory with the recordings "
-                                       "(relative to the current directory).")] = Path("sample_data"),
+    data: Annotated[Optional[Path], typer.Option(
+        "--data", show_default=False, help="Data directory with the recordings (default: sample_data/ "
+                                           "when the current folder has one, else recorded from the twin).")] = None,
     out: Annotated[Path, typer.Option("--out", help="Folder for results.json, tables.md and the "
                                       "figures.")] = Path("demo_out"),
     trials: Annotated[int, typer.Option("--trials", min=1, max=20, help="Trials per run (different "
@@ -56,37 +58,30 @@ def demo(
                                               "controllers (no diagnosis, no comp+shift+diag).")] = False,
     quiet: QuietOpt = False,
 ) -> None:
-    data_dir = None if simulate else data
-    if data_dir is not None and not data_dir.is_dir():
-        raise DataError(f"{data_dir}: no such data directory (run `hyst demo` from the repository root, "
-                        f"where sample_data/ is, give --data DIR, or use --simulate)")
+    from .. import experiment
+
+    if simulate and data is not None:
+        usage_error("give --data DIR or --simulate, not both", "--data / --simulate")
+    if data is not None and not data.is_dir():
+        raise DataError(f"{data}: no such data directory (give a folder made by scripts/make_sample_data.py, "
+                        "or leave --data out to use sample_data/ here or the twin)")
     if out.exists() and not out.is_dir():
         raise DataError(f"{out}: exists and is not a directory (--out needs a folder)")
+    data_dir = None if simulate else (data if data is not None else experiment.default_data_dir())
+    # without --simulate the recordings are the sample data's, wherever they come from
+    recording_seed = None if simulate else experiment.SAMPLE_DATA_SEED
+    if data_dir is None and not simulate:
+        info("no sample_data/ in this folder: recording the same data from the twin (seeded, "
+             "as scripts/make_sample_data.py made it)", quiet)
 
     started = time.perf_counter()
-    bar = None
-    progress = None
-    if not quiet and stderr_is_tty():
-        from rich.console import Console
-        from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
-
-        bar = Progress(TextColumn("{task.description:<44}"), BarColumn(), TextColumn("{task.completed}/{task.total}"),
-                       TimeElapsedColumn(), console=Console(stderr=True), transient=True)
-        task = bar.add_task("reading the recordings", total=None)
-
-        def progress(what: str, done: int, total: int) -> None:
-            bar.update(task, description=what[:44], completed=done, total=total)
-
-        bar.start()
-    try:
-        result = experiment.run_protocol(trials=trials, seed=seed, data_dir=data_dir, progress=progress,
-                                           diagnose=not no_diagnose)
-    finally:
-        if bar is not None:
-            bar.stop()
+    with progress(quiet) as update:
+        result = experiment.run_protocol(trials=trials, seed=seed, data_dir=data_dir, progress=update,
+                                         diagnose=not no_diagnose, recording_seed=recording_seed)
     text = experiment.render(result, fmt.value)
     written = experiment.write_outputs(result, out, with_figures=not no_figures)
     elapsed = time.perf_counter() - started
-    typer.echo(text, nl=False)
+    if prints(fmt, quiet):
+        typer.echo(text, nl=False)
     info(f"wrote {', '.join(str(p) for p in written)}", quiet)
     info(f"demo took {elapsed:.1f} s ({len(result.runs)} runs)", quiet)

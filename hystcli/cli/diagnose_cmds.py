@@ -8,15 +8,15 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from .. import io
-from .app import FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, echo_json, info
+from .app import (FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, distinct_inputs,
+                  distinct_outputs, echo_json, info, progress, usage_error)
 
 
-@command("diagnose", epilog="Example: hyst diagnose --model model.json runs/*.csv -o report.json "
-                            "--model-out augmented.json --holdout motion=nonperiodic")
+@command("diagnose", epilog="Example: hyst diagnose --model shifted.json run_none.csv run_only.csv run_shift.csv "
+                            "run_shift2.csv -o report.json --model-out augmented.json --plot diag.png")
 def diagnose_cmd(
-    runs: Annotated[List[Path], typer.Argument(help="Run CSVs with t, q<k> and measured y<k> (at least 2, "
-                                                    "one catheter).", show_default=False)],
+    runs: Annotated[List[Path], typer.Argument(metavar="RUN.csv", help="Run CSVs with t, q<k> and measured "
+                                                    "y<k> (at least 2, one catheter).", show_default=False)],
     model_path: ModelOpt,
     output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Write the report as JSON here.")] = None,
     model_out: Annotated[Optional[Path], typer.Option(
@@ -41,35 +41,47 @@ def diagnose_cmd(
     held-out runs; the best are added while the held-out gain is worth it. HOW FAR: held-out RMSE
     and PTPE before and after.
     """
+    from .. import io
     from ..diagnose import diagnose, diagnosis_figure
+    from ..effects import EFFECTS
 
     if fmt not in (OutputFormat.table, OutputFormat.json):
-        raise typer.BadParameter("diagnose writes table or json", param_hint="--format")
+        usage_error("diagnose writes table or json", "--format")
+    distinct_outputs(**{"--output": output, "--model-out": model_out, "--plot": plot})
+    distinct_inputs(runs)
+    if holdout is not None and holdout.strip():
+        key, eq, value = holdout.partition("=")
+        if not (eq and key.strip() and value.strip()):
+            usage_error(f"{holdout!r}: expected key=value, e.g. motion=nonperiodic", "--holdout")
     inputs = [*runs, model_path]
     for out in (output, model_out, plot):
         if out is not None:
             io.check_not_input(out, inputs)
-    model = io.load_model(model_path)
-    loaded = [io.read_run(p, require=("t",)) for p in runs]
     cands = None
     if candidates is not None:
-        cands = [c.strip() for c in candidates.split(",") if c.strip()]
+        cands = [c.strip().lower() for c in candidates.split(",") if c.strip()]
         if not cands:
-            raise typer.BadParameter("give at least one effect name", param_hint="--candidates")
-    progress = None if quiet else _progress_lines()
-    diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
-                    bootstrap=bootstrap, seed=seed, progress=progress)
+            usage_error("give at least one effect name", "--candidates")
+        unknown = [c for c in cands if c not in EFFECTS]
+        if unknown:
+            usage_error(f"unknown effect {unknown[0]!r} (known: {', '.join(EFFECTS)})", "--candidates")
+    model = io.load_model(model_path)
+    loaded = [io.read_run(p, require=("t",)) for p in runs]
+    with progress(quiet) as update:
+        diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
+                        bootstrap=bootstrap, seed=seed, progress=update)
     report = diag.report()
     report["model"] = str(model_path)
     png = diagnosis_figure(diag, loaded) if plot is not None else None
-    if output is not None:
-        io.atomic_write_text(output, json.dumps(report, indent=2, allow_nan=False) + "\n", inputs=inputs)
-    if model_out is not None:
-        meta = dict(diag.model.meta)
-        meta["diagnosed_on"] = ", ".join(Path(p).name for p in runs)
-        io.save_model(model_out, replace(diag.model, meta=meta), inputs=inputs)
-    if png is not None:
-        io.atomic_write(plot, lambda f: f.write(png), inputs=inputs)
+    with io.all_or_none() as pending:
+        if output is not None:
+            pending.write_text(output, json.dumps(report, indent=2, allow_nan=False) + "\n", inputs=inputs)
+        if model_out is not None:
+            meta = dict(diag.model.meta)
+            meta["diagnosed_on"] = ", ".join(Path(p).name for p in runs)
+            pending.write_text(model_out, io.dumps_model(replace(diag.model, meta=meta)), inputs=inputs)
+        if png is not None:
+            pending.write_bytes(plot, png, inputs=inputs)
     if quiet:
         return
     if fmt == OutputFormat.json:
@@ -79,16 +91,6 @@ def diagnose_cmd(
     for path in (output, model_out, plot):
         if path is not None:
             info(f"wrote {path}")
-
-
-def _progress_lines():
-    """Progress as plain lines on stderr, whether it is a terminal or a file (a piped bootstrap
-    shows where it is), each with the seconds since the start. Kept here until the shared progress
-    helper of ``cli/app.py`` lands."""
-    import time
-
-    t0 = time.monotonic()
-    return lambda msg: info(f"  [{time.monotonic() - t0:5.1f} s] {msg}")
 
 
 def _num(v, width: int, digits: int) -> str:

@@ -7,18 +7,20 @@ what was done (rows, rate, ranges, gain, zeroing, drift, warnings).
 """
 from __future__ import annotations
 
+import contextlib
 import dataclasses
 import json
+import math
 from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .. import importer
+from .. import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
 from ..errors import DataError
-from ..io import check_not_input, format_run, atomic_write_text
-from .app import FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, warn
+from ..io import all_or_none, check_not_input, format_run
+from .app import FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, option_errors, usage_error, warn
 
 
 class ZeroMode(str, Enum):
@@ -35,32 +37,40 @@ class TimeRepair(str, Enum):
 def _mapping(preset: Optional[str], mapping_file: Optional[Path], spec: Optional[str], sep: Optional[str],
              comment: Optional[str], skip: Optional[int], rate: Optional[float],
              header_patterns: list[str]) -> importer.ImportMapping:
+    """The mapping the options describe. A malformed option value is a usage error (exit 2); a
+    malformed --mapping file is bad data (exit 1)."""
     if preset is not None and mapping_file is not None:
-        raise typer.BadParameter("give --preset or --mapping, not both", param_hint="--preset")
+        usage_error("give --preset or --mapping, not both", "--preset")
     if preset is None and mapping_file is None and spec is None:
-        raise typer.BadParameter("say how to read the files: --preset NAME, --mapping FILE.json or "
-                                 "--map t=1,q1=2:SCALE,...", param_hint="--map")
-    extra = importer.parse_map_spec(spec) if spec is not None else ()
+        usage_error("say how to read the files: --preset NAME, --mapping FILE.json or "
+                    "--map t=1,q1=2:SCALE,...", "--map")
+    with option_errors("--map"):
+        extra = importer.parse_map_spec(spec) if spec is not None else ()
     if preset is not None:
-        base = importer.get_preset(preset)
+        with option_errors("--preset"):
+            base = importer.get_preset(preset)
     elif mapping_file is not None:
         base = importer.load_mapping(mapping_file)
     else:
         base = None
     changes: dict = {}
     if sep is not None:
-        changes["separator"] = importer.parse_separator(sep)
+        with option_errors("--sep"):
+            changes["separator"] = importer.parse_separator(sep)
     if comment is not None:
         changes["comment"] = comment or None
     if skip is not None:
         changes["skip"] = skip
     if rate is not None:
         changes["rate"] = rate
-    pats = tuple(importer.parse_meta_pattern(p) for p in header_patterns)
-    if base is None:
-        return importer.ImportMapping(columns=tuple(extra), meta_from_header=pats, name="--map", **changes)
-    m = base.with_columns(extra)
-    return dataclasses.replace(m, meta_from_header=m.meta_from_header + pats, **changes)
+    with option_errors("--meta-from-header"):
+        pats = tuple(importer.parse_meta_pattern(p) for p in header_patterns)
+    # what the options combine to is checked as a whole (a time column, no target twice)
+    with contextlib.nullcontext() if mapping_file is not None else option_errors("--map"):
+        if base is None:
+            return importer.ImportMapping(columns=tuple(extra), meta_from_header=pats, name="--map", **changes)
+        m = base.with_columns(extra)
+        return dataclasses.replace(m, meta_from_header=m.meta_from_header + pats, **changes)
 
 
 def _fmt_range(lo: float, hi: float) -> str:
@@ -103,14 +113,17 @@ def _render(rep: importer.ImportReport, meta: dict, out: Path) -> list[str]:
         "falls as the input rises (reported), --resample HZ (anti-alias low-pass when lowering the "
         "rate), --detrend (remove the output drift; reported either way), --time-repair drop "
         "(default: an error on non-increasing time).\n\n"
-        "Examples:\n\n"
-        "    hyst import ../shared/real/mrdlab/load_freq/00.TXT.gz --preset mrdlab -o run00.csv\n\n"
-        "    hyst import log.txt --map t=1:0.001,q1=2:360/8192,y1=5:0.09,c1=4 --comment '%' -o run.csv\n\n"
-        "    hyst import raw/*.TXT.gz --preset mrdlab --resample 200 --out-dir runs/"
+        "The current is written in mA, converted from the unit the log states (metadata "
+        "current_unit: A, mA or uA; the mrdlab preset states A).\n\n"
+        "Examples (from the repository root):\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --preset mrdlab -o run41.csv\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --map t=1,q1=2:360/8192,y1=5:0.09,c1=4 "
+        "--comment '%' --meta current_unit=A -o run.csv\n\n"
+        "    hyst import tests/data/mrdlab/load_freq/*.TXT.gz --preset mrdlab --resample 200 --out-dir ."
     ),
 )
 def import_(
-    raw: Annotated[list[Path], typer.Argument(metavar="RAW...", help="Raw log files (text or gzip).")],
+    raw: Annotated[list[Path], typer.Argument(metavar="RAW", help="Raw log files (text or gzip).")],
     output: Annotated[Optional[Path], typer.Option("--output", "-o", help="Output run CSV (one input).")] = None,
     out_dir: Annotated[Optional[Path], typer.Option(
         "--out-dir", help="Folder for many inputs: RAW name without .gz and extension, plus .csv.")] = None,
@@ -150,19 +163,19 @@ def import_(
     quiet: QuietOpt = False,
 ) -> None:
     if fmt not in (OutputFormat.table, OutputFormat.json):
-        raise typer.BadParameter("import prints a table or json", param_hint="--format")
-    if rate is not None and not rate > 0:
-        raise typer.BadParameter("must be a positive number of Hz", param_hint="--rate")
-    if resample_hz is not None and not resample_hz > 0:
-        raise typer.BadParameter("must be a positive number of Hz", param_hint="--resample")
+        usage_error("import prints a table or json", "--format")
+    if rate is not None and not 0 < rate < math.inf:
+        usage_error("must be a positive number of Hz", "--rate")
+    if resample_hz is not None and not 0 < resample_hz < math.inf:
+        usage_error("must be a positive number of Hz", "--resample")
     mapping = _mapping(preset, mapping_file, spec, sep, comment, skip, rate, meta_from_header or [])
     if show_mapping:
         typer.echo(json.dumps(importer.mapping_to_dict(mapping), indent=2))
         return
     if (output is None) == (out_dir is None):
-        raise typer.BadParameter("give -o OUT.csv (one input) or --out-dir DIR", param_hint="--output")
+        usage_error("give -o OUT.csv (one input) or --out-dir DIR", "--output")
     if output is not None and len(raw) > 1:
-        raise typer.BadParameter(f"{len(raw)} inputs: use --out-dir DIR", param_hint="--output")
+        usage_error(f"{len(raw)} inputs: use --out-dir DIR", "--output")
     if out_dir is not None and not out_dir.is_dir():
         raise DataError(f"{out_dir}: no such folder")
     targets = [output] if output is not None else [out_dir / importer.output_name(p) for p in raw]
@@ -170,19 +183,21 @@ def import_(
     for src, dst in zip(raw, targets):
         key = dst.resolve()
         if key in seen:
-            raise typer.BadParameter(f"{seen[key]} and {src} would both be written to {dst}", param_hint="--out-dir")
+            usage_error(f"{seen[key]} and {src} would both be written to {dst}", "--out-dir")
         seen[key] = src
         check_not_input(dst, raw)
+    with option_errors("--meta"):
+        meta_values = dict(importer.parse_meta_option(m) for m in (meta or []))
     options = importer.ImportOptions(
         zero=zero.value, flip_output=flip_output, resample=resample_hz, detrend=detrend,
-        time_repair=time_repair.value, decimals=decimals,
-        meta=dict(importer.parse_meta_option(m) for m in (meta or [])))
+        time_repair=time_repair.value, decimals=decimals, meta=meta_values)
 
     # convert everything first: a bad file leaves no output at all
     done = [importer.convert(p, mapping, options) for p in raw]
     texts = [format_run(d.run) for d in done]
-    for dst, text in zip(targets, texts):
-        atomic_write_text(dst, text, inputs=raw)
+    with all_or_none() as pending:
+        for dst, text in zip(targets, texts):
+            pending.write_text(dst, text, inputs=raw)
 
     if fmt == OutputFormat.json:
         echo_json([dict(d.report.to_dict(), output=str(dst), meta=dict(d.run.meta)) for d, dst in zip(done, targets)])

@@ -10,17 +10,14 @@ from typing import Annotated, Optional
 
 import typer
 
-from .. import metrics
-from ..errors import DataError
-from ..io import atomic_write, atomic_write_text, check_not_input, read_run
-from .app import FormatOpt, OutputFormat, PlotOpt, QuietOpt, command, info, warn
+from .. import metrics  # numpy only: the grouping fields and plot formats name the options
+from .app import (FormatOpt, OutputFormat, PlotOpt, QuietOpt, command, distinct_inputs, distinct_outputs, info,
+                  option_errors, prints, usage_error, warn)
 
 
 def _group_by(value: str) -> str:
-    try:
+    with option_errors("--group-by"):
         metrics.parse_group_by(value)
-    except DataError as exc:
-        raise typer.BadParameter(str(exc)) from None
     return value
 
 
@@ -31,9 +28,10 @@ def _group_by(value: str) -> str:
         "improvement rates against the controllers `none` and `comp` (the paper's Tables I and II).\n\n"
         "Runs are grouped by their metadata (controller, shape, motion by default; trials, "
         "catheters and knobs are pooled); std is the sample std (ddof=1); improvement % = "
-        "(base - new) / base * 100 on the group means. Missing metadata is grouped as 'unknown'.\n\n"
+        "(base - new) / base * 100 on the group means. Missing metadata is grouped as 'unknown'. "
+        "The same file given twice is an error: it would count one run twice in the means.\n\n"
         "Example:\n\n"
-        "    hyst evaluate runs/*.csv --format latex -o table1.tex --plot fig6.png"
+        "    hyst evaluate run_none.csv run_only.csv run_shift.csv --format latex -o table1.tex --plot fig6.png"
     ),
 )
 def evaluate(
@@ -51,15 +49,17 @@ def evaluate(
         "--output", "-o", help="Write the result to this file (atomically) instead of stdout.")] = None,
     quiet: QuietOpt = False,
 ) -> None:
+    from ..io import all_or_none, check_not_input, read_run
+
     if plot is not None:
         suffix = plot.suffix.lower().lstrip(".")
         if suffix not in metrics.PLOT_FORMATS:
-            raise typer.BadParameter(f"{plot} must end in .png, .pdf or .svg", param_hint="--plot")
-    if output is not None and plot is not None and output.resolve() == plot.resolve():
-        raise typer.BadParameter("the output and the plot must be different files", param_hint="--plot")
+            usage_error(f"{plot} must end in .png, .pdf or .svg", "--plot")
+    distinct_outputs(**{"--output": output, "--plot": plot})
     for target in (output, plot):
         if target is not None:
             check_not_input(target, runs)
+    distinct_inputs(runs)
 
     loaded = [read_run(p) for p in runs]
     evaluation = metrics.evaluate_runs(loaded, group_by=metrics.parse_group_by(group_by))
@@ -69,12 +69,16 @@ def evaluate(
     if not quiet:
         for w in evaluation.warnings:
             warn(w)
-    # Everything is computed before the first write: a failure leaves no output file behind.
-    if output is not None:
-        atomic_write_text(output, text, inputs=runs)
-        info(f"wrote {output}", quiet)
-    else:
+    # Everything is computed before the first write, and the files are renamed into place together:
+    # a failure leaves no output file behind.
+    with all_or_none() as pending:
+        if output is not None:
+            pending.write_text(output, text, inputs=runs)
+        if png is not None:
+            pending.write_bytes(plot, png, inputs=runs)
+    if output is None and prints(fmt, quiet):
         typer.echo(text, nl=False)
-    if png is not None:
-        atomic_write(plot, lambda f: f.write(png), inputs=runs)
-        info(f"wrote {plot}", quiet)
+    for path in (output, plot):
+        if path is not None:
+            info(f"wrote {path}", quiet)
+

@@ -1,21 +1,18 @@
 """Commands over the model itself: ``identify``, ``compensate``, ``predict``, ``rotate-shift``."""
 from __future__ import annotations
 
-from dataclasses import replace
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .. import compensation, io
-from ..model import PARAM_NAMES, Geometry
-from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command,
-                  echo_json, info, warn)
+from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
+                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error, warn)
 
-InputArg = Annotated[Path, typer.Argument(help="Input run CSV.", show_default=False)]
+InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
 
-@command("identify", epilog="Example: hyst identify sample_data/sweep_ice-a.csv -o model.json --plot fit.png")
+@command("identify", epilog="Example: hyst identify sample_data/ice-a/sweep_knob1.csv -o model.json --plot fit.png")
 def identify_cmd(
     sweep: InputArg,
     output: OutOpt,
@@ -35,42 +32,77 @@ def identify_cmd(
 ) -> None:
     """Identify the straight-shaft hysteresis model of each knob from a sweep.
 
-    Reads q<k> and c<k> (and y<k> when present) of every knob in SWEEP. With y: least-squares fit
-    of all seven parameters through the model; without: dead-zone edges and backlash from the
+    Reads q<k> and c<k> (and y<k> when present) of every knob in RUN.csv. With y: least-squares
+    fit of all seven parameters through the model; without: dead-zone edges and backlash from the
     motor current, omega given, heights by the documented assumption.
     """
-    from ..identify import identify, plot_identification
+    from dataclasses import replace
 
-    if omega is not None and not omega > 0:
-        raise typer.BadParameter("omega must be > 0", param_hint="--omega")
+    from .. import io
+    from ..identify import identify, plot_identification
+    from ..model import Geometry
+
+    if omega is not None and not (omega > 0 and omega < float("inf")):
+        usage_error(f"must be a positive number, got {omega}", "--omega")
     if (beta_catheter_mm is None) != (beta_knob_mm is None):
-        raise typer.BadParameter("give both --beta-catheter-mm and --beta-knob-mm, or neither")
-    geometry = Geometry(beta_catheter_mm, beta_knob_mm) if beta_catheter_mm is not None else None
+        usage_error("give both --beta-catheter-mm and --beta-knob-mm, or neither", "--beta-catheter-mm")
+    distinct_outputs(**{"--output": output, "--plot": plot})
+    geometry = None
+    if beta_catheter_mm is not None:
+        with option_errors("--beta-catheter-mm / --beta-knob-mm"):
+            geometry = Geometry(beta_catheter_mm, beta_knob_mm)
     io.check_not_input(output, [sweep])
-    run = io.read_run(sweep, require=("t",))
-    result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
+    with about(sweep):
+        run = io.read_run(sweep, require=("t",))
+        result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
     meta = dict(result.model.meta)
     meta.update(io.provenance(sweep, catheter=run.meta.get("catheter")))
     model = replace(result.model, meta=meta, geometry=geometry or result.model.geometry)
-    if plot is not None:
-        io.check_not_input(plot, [sweep])
-        plot_identification(run, result, plot)
-    io.save_model(output, model, inputs=[sweep])
-    if quiet:
-        return
-    if fmt == OutputFormat.json:
+    # the figure and the model together or neither (an error drawing the one loses no old other)
+    with io.all_or_none() as pending:
+        if plot is not None:
+            plot_identification(run, result, pending.path(plot, inputs=[sweep]))
+        pending.write_text(output, io.dumps_model(model), inputs=[sweep])
+    if not prints(fmt, quiet):
+        pass
+    elif fmt == OutputFormat.json:
         echo_json({str(k): {"params": f.model.params(), "stderr": dict(f.stderr), "rmse": f.rmse,
                             "method": f.method} for k, f in result.fits.items()})
-        return
+    elif fmt == OutputFormat.table:
+        for line in _identify_lines(result):
+            typer.echo(line)
+    else:
+        echo_table(_identify_table(result), fmt)
+    info(f"wrote {output}" + (f" and {plot}" if plot is not None else ""), quiet)
+
+
+def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identification
+    from ..model import PARAM_NAMES
+
+    lines = []
     for k, fit in result.fits.items():
-        typer.echo(f"knob {k} ({fit.method}{', RMSE %.2f deg' % fit.rmse if fit.rmse is not None else ''})")
+        lines.append(f"knob {k} ({fit.method}{', RMSE %.2f deg' % fit.rmse if fit.rmse is not None else ''})")
         for name in PARAM_NAMES:
             if name == "offset":
                 continue
             value = getattr(fit.model, name)
             err = fit.stderr.get(name)
-            typer.echo(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else "  (assumed)"))
-    info(f"wrote {output}", quiet)
+            lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else "  (assumed)"))
+    return lines
+
+
+def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -> metrics.Table
+    from ..metrics import Table
+    from ..model import PARAM_NAMES
+
+    rows = []
+    for k, fit in result.fits.items():
+        for name in PARAM_NAMES:
+            if name != "offset":
+                rows.append((k, name, getattr(fit.model, name), fit.stderr.get(name), fit.method, fit.rmse))
+    return Table(("knob", "parameter", "value", "stderr", "method", "rmse"),
+                 ("knob", "parameter", "value", "+- (1 sigma)", "method", "RMSE (deg)"), tuple(rows),
+                 ("deg, omega in deg/deg; '-': fixed by assumption (current-only identification)",))
 
 
 @command("compensate", epilog="Example: hyst compensate traj.csv --model shifted.json -o commands.csv")
@@ -87,6 +119,7 @@ def compensate_cmd(
 
     Keeps t, r and the metadata; sets `controller` (comp or comp+shift) and the offsets used.
     """
+    from .. import compensation, io
     io.check_not_input(output, [trajectory, model_path])
     model = io.load_model(model_path)
     traj = io.read_run(trajectory)
@@ -98,22 +131,49 @@ def compensate_cmd(
          + ", ".join(f"knob {k}: {o:+.2f} deg" for k, o in result.offsets.items()) + ")", quiet)
 
 
-@command("predict", epilog="Example: hyst predict run.csv --model model.json -o predicted.csv")
+@command("predict", epilog="Example: hyst predict run_shift.csv --model shifted.json -o pred.csv")
 def predict_cmd(
-    run_path: Annotated[Path, typer.Argument(help="Run CSV with t and q1/q2.", show_default=False)],
+    run_path: Annotated[Path, typer.Argument(metavar="RUN.csv", help="Run CSV with t and q1/q2.",
+                                             show_default=False)],
     model_path: ModelOpt,
     output: OutOpt,
+    fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Run the model on the commands q1/q2 of a run and write the predicted tip angles y1/y2.
 
-    A measured y<k> is kept as y<k>_measured beside the prediction.
+    A measured y<k> is kept as y<k>_measured beside the prediction; the summary on stdout gives
+    per knob the predicted range and, with a measurement, the RMSE and PTPE of prediction minus
+    measurement.
     """
+    from .. import compensation, io
+
     io.check_not_input(output, [run_path, model_path])
     model = io.load_model(model_path)
-    run = io.read_run(run_path)
-    io.write_run(output, compensation.predict(model, run), inputs=[run_path, model_path])
+    with about(run_path):
+        run = io.read_run(run_path)
+        predicted = compensation.predict(model, run)
+    io.write_run(output, predicted, inputs=[run_path, model_path])
+    if prints(fmt, quiet):
+        echo_table(_prediction_table(predicted), fmt)
     info(f"wrote {output}", quiet)
+
+
+def _prediction_table(predicted):  # noqa: ANN001, ANN202 - io.Run -> metrics.Table
+    import numpy as np
+
+    from ..metrics import Table, ptpe, rmse
+
+    rows = []
+    for k in predicted.knobs("y"):
+        y = predicted[f"y{k}"]
+        measured = predicted.columns.get(f"y{k}_measured")
+        err = None if measured is None else y - measured
+        rows.append((k, len(y), float(np.min(y)), float(np.max(y)),
+                     None if err is None else rmse(err), None if err is None else ptpe(err)))
+    return Table(("knob", "samples", "y_min", "y_max", "rmse_vs_measured", "ptpe_vs_measured"),
+                 ("knob", "samples", "y min", "y max", "RMSE vs measured", "PTPE vs measured"), tuple(rows),
+                 ("predicted tip angle y and its error against the measured y, deg; '-': no measurement",))
 
 
 @command("rotate-shift", epilog="Example: hyst rotate-shift --model shifted.json --degrees 30 -o rotated.json")
@@ -121,6 +181,7 @@ def rotate_shift_cmd(
     model_path: ModelOpt,
     degrees: Annotated[float, typer.Option("--degrees", help="Bulk rotation of the catheter body (deg).")],
     output: OutOpt,
+    fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Update both knobs' offsets after a bulk rotation of the catheter body, without moving a knob.
@@ -128,10 +189,24 @@ def rotate_shift_cmd(
     The vector (offset1, offset2) rotates by -degrees (DESIGN.md section 3; the paper leaves
     this case out).
     """
+    import math
+
+    from .. import io
+    from ..metrics import Table
+
+    if not math.isfinite(degrees):
+        usage_error(f"must be a finite number of degrees, got {degrees}", "--degrees")
     io.check_not_input(output, [model_path])
     model = io.load_model(model_path)
     rotated = model.rotated(degrees)
     io.save_model(output, rotated, inputs=[model_path])
-    if not quiet:
+    if not prints(fmt, quiet):
+        return
+    if fmt == OutputFormat.table:
         for k in rotated.knobs:
             typer.echo(f"knob {k}: offset {model.knob(k).offset:+.3f} -> {rotated.knob(k).offset:+.3f} deg")
+    else:
+        rows = tuple((k, model.knob(k).offset, rotated.knob(k).offset) for k in rotated.knobs)
+        echo_table(Table(("knob", "offset_before", "offset_after"), ("knob", "offset before", "offset after"),
+                         rows, (f"deg; catheter body rotated by {degrees:g} deg",)), fmt, digits=3)
+    info(f"wrote {output}", quiet)
