@@ -683,11 +683,12 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     # one BLAS thread: the protocol's linear algebra is many small products, where a threaded
     # BLAS spends its time waking (and, on a shared 2-core machine, fighting for) threads
     with threadpool_limits(limits=1):
-        return _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, duration_scale, diagnose)
+        return _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, duration_scale, diagnose,
+                             recording_seed)
 
 
 def _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, duration_scale,
-                  diagnose) -> ExperimentResult:
+                  diagnose, recording_seed) -> ExperimentResult:
     if int(trials) < 1:
         raise DataError(f"trials must be at least 1, got {trials}")
     if not catheters:
