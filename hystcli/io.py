@@ -579,8 +579,8 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
                 q_max=_num(d["q_max"], "identification q_max"),
                 rmse=None if d.get("rmse") is None else _num(d["rmse"], "identification rmse"),
                 stderr={k: _num(v, f"identification stderr {k}") for k, v in (d.get("stderr") or {}).items()},
-                current_dead_zone=(None if d.get("current_dead_zone") is None
-                                   else _num(d["current_dead_zone"], "identification current_dead_zone")),
+                **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
+                   for name in KnobIdentification.OPTIONAL},
             )
         except KeyError as exc:
             raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
@@ -603,7 +603,8 @@ def model_to_dict(model: Model) -> dict:
         out["identification"] = {
             str(k): {"slope_dead_zone": v.slope_dead_zone, "slope_loaded": v.slope_loaded,
                      "q_min": v.q_min, "q_max": v.q_max, "rmse": v.rmse, "stderr": dict(v.stderr),
-                     "current_dead_zone": v.current_dead_zone}
+                     **{name: getattr(v, name) for name in KnobIdentification.OPTIONAL
+                        if name == "current_dead_zone" or getattr(v, name) is not None}}
             for k, v in model.identification.items()}
     return out
 

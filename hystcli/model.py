@@ -499,6 +499,14 @@ class KnobIdentification:
     current_dead_zone : float or None
         Typical motor current inside the dead zone (no tendon taut), so a search that starts
         with a tendon already taut can tell which one from the current level.
+    current_noise : float or None
+        Sample-to-sample noise of the (conditioned) current on the sweep (current unit).
+    no_load_rising, no_load_falling : float or None
+        No-load current while the knob turns positive / negative: the motor's own Coulomb
+        friction moves the level with the direction of motion.
+    current_edge_pos, current_edge_neg : float or None
+        Where the sweep's current showed a tendon taken up (deg of knob): the loading edges read
+        the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
     """
 
     slope_dead_zone: float
@@ -508,9 +516,18 @@ class KnobIdentification:
     rmse: float | None = None
     stderr: Mapping[str, float] = field(default_factory=dict)
     current_dead_zone: float | None = None
+    current_noise: float | None = None
+    no_load_rising: float | None = None
+    no_load_falling: float | None = None
+    current_edge_pos: float | None = None
+    current_edge_neg: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
+
+    OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
+                "current_edge_pos", "current_edge_neg")
+    """Fields a model file may leave out (older files have none of them but the first)."""
 
     @property
     def eps_lower(self) -> float:

@@ -1,3 +1,410 @@
-from ._old import *  # noqa: F401,F403  (temporary while the package is built)
-from ._old import (check_sweep, find_reversals, identify, plot_identification,  # noqa: F401
-                   Identification, KnobFit, SweepCheck, BranchFit)
+"""Identification of a catheter's straight-shaft hysteresis model from a sweep (``hyst identify``).
+
+This package owns DESIGN.md sections 3-4 seen from the data side:
+
+* :mod:`.sweep` checks what a record offers (its reversals; at least one, so the knob goes both
+  ways) and decimates long records without changing the clamp recursion's output;
+* :mod:`.tip` fits the seven tip parameters by *output error*: the model simulated from the
+  record's first sample and fitted to every measured tip angle, so a record is usable however it
+  starts and however many cycles it holds, one included; it names every parameter the record
+  cannot fix instead of returning it;
+* :mod:`.current` reads the motor current: the loading edges where a tendon is taken up (a jump
+  in slope, not a flat stretch, so pretensioned tendons work), the backlash plateau when the
+  current shows one, the levels and slopes Algorithm 1 needs.
+
+:func:`identify` puts them together per knob. With a measured tip angle the tip fit decides the
+model and the current only gives Algorithm 1's levels; with the current alone (the paper's
+procedure) the current's edges and plateaus are the model, ``omega`` is given (the paper's
+1.45 by default) and the heights follow a stated assumption.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+from typing import Mapping, Sequence
+
+import numpy as np
+
+from ..current import condition
+from ..errors import IdentificationError, ModelError
+from ..io import Run
+from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
+from .current import CurrentReading, read_current
+from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
+from .tip import PARAMS as TIP_PARAMS
+from .tip import TipFit, bootstrap_tip, fit_tip, z_path
+
+__all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "find_reversals",
+           "identify", "plot_identification"]
+
+
+@dataclass(frozen=True)
+class KnobFit:
+    """Identification of one knob.
+
+    Attributes
+    ----------
+    knob : int
+    model : KnobModel
+        The identified straight-shaft model (offset 0).
+    stderr : dict of str to float
+        One-sigma uncertainty of each identified parameter (deg, or deg/deg for omega);
+        parameters fixed by assumption (omega and the heights on the current path) are absent.
+    rmse : float or None
+        RMSE of the model, started from the first measured tip angle, against every sample
+        (deg), when ``y`` exists.
+    method : str
+        ``"tip"`` (output-error fit through the forward model) or ``"current"``.
+    ident : KnobIdentification or None
+        What ``detect-shift`` needs (current levels and slopes, identified range, stderr).
+    n_reversals : int
+        Reversals of the knob command.
+    n_cycles : int
+        Complete cycles (a branch each way between reversals).
+    current : CurrentReading or None
+        What the current showed (edges, plateaus, levels).
+    tip : TipFit or None
+        The tip fit.
+    bootstrap : int
+        Bootstrap replicates behind ``stderr`` (0: the fit's own covariance).
+    warnings : tuple of str
+        What the user should know (e.g. the current's edges disagree with the tip's).
+    """
+
+    knob: int
+    model: KnobModel
+    stderr: dict[str, float]
+    rmse: float | None
+    method: str
+    ident: KnobIdentification | None
+    n_reversals: int
+    n_cycles: int = 0
+    current: CurrentReading | None = field(default=None, repr=False)
+    tip: TipFit | None = field(default=None, repr=False)
+    bootstrap: int = 0
+    warnings: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class Identification:
+    """Result of :func:`identify`: one :class:`KnobFit` per knob and the assembled model."""
+
+    fits: dict[int, KnobFit]
+    model: Model
+
+
+def _knob_list(run: Run, knobs, use_tip: bool = False) -> list[int]:
+    where = f"{run.source}: " if run.source else ""
+    if knobs is None:
+        ks = [k for k in (1, 2) if f"q{k}" in run
+              and (f"c{k}" in run or (use_tip and f"y{k}" in run))]
+        if not ks:
+            need = "q1,c1 or q2,c2 (or q1,y1 / q2,y2 for the tip fit)" if use_tip else "q1,c1 or q2,c2"
+            raise IdentificationError(
+                f"{where}no knob to identify: needs a pair of columns {need} "
+                f"(columns: {', '.join(run.columns) or 'none'})")
+        return ks
+    ks = []
+    for k in knobs:
+        try:
+            k = int(k)
+        except (TypeError, ValueError):
+            raise IdentificationError(f"knob {k!r} is not 1 or 2") from None
+        if k not in (1, 2):
+            raise IdentificationError(f"knob {k} is not a knob of a two-knob catheter (1 or 2)")
+        if k not in ks:
+            ks.append(k)
+    if not ks:
+        raise IdentificationError("no knob to identify")
+    return ks
+
+
+def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None = None,
+             use_tip: bool = True, bootstrap: int = 0, seed: int = 0,
+             filter_hz: float | None = 20.0) -> Identification:
+    """Identify the straight-shaft hysteresis model of each knob from a sweep.
+
+    Tip (``y<k>`` present and ``use_tip``): output-error fit of :math:`D_{pos}, D_{neg},
+    B_{pos}, B_{neg}, \\omega, H_{pos}, H_{neg}` (:mod:`.tip`), the record's first measured
+    ``y`` as :math:`y_{-1}` for the reported RMSE (DESIGN.md section 3). The fit's
+    parameterisation keeps every trial model valid, which restricts it to
+    :math:`H_{neg} \\ge H_{pos}` (the falling dead zone above the rising one, as on every
+    measured loop).
+
+    Current only (no ``y<k>``, or ``use_tip`` False): the loading edges
+    :math:`D_{pos}, D_{neg}` and the backlash plateaus :math:`B_{pos}, B_{neg}` read from the
+    current (:mod:`.current`); :math:`\\omega` is ``omega`` or the paper's 1.45; the heights,
+    which the current cannot see, follow a stated assumption. The tip moves only while a tendon
+    is taut, so on the way up the tip's dead zone should begin where the negative tendon goes
+    slack, :math:`\\hat D_{pos} = D_{neg}`, i.e. :math:`H_{neg} - H_{pos} = \\omega B_{neg}`,
+    and on the way down :math:`H_{neg} - H_{pos} = \\omega B_{pos}`; both hold only when the
+    backlashes are equal, so we take the mean (raised if needed to keep the model valid) and
+    centre the loop on the straight tip, :math:`H_{pos} = -H_{neg}`.
+
+    Uncertainties (``KnobFit.stderr``, one sigma): on the tip path the fit's Gauss-Newton
+    covariance with the residual variance inflated by the residuals' autocorrelation time; on
+    the current path the spread of the per-stretch readings, never below the kink fits' own.
+    With ``bootstrap > 0``, the standard deviation over that many refits resampling whole cycles
+    (seeded), never below the estimate without it.
+
+    Parameters
+    ----------
+    run : Run
+        The sweep: ``t``, ``q<k>``, ``c<k>`` and optionally ``y<k>`` per knob.
+    knobs : sequence of int, optional
+        Knobs to identify; default every ``k`` with ``q<k>`` and ``c<k>`` (or ``y<k>``).
+    omega : float, optional
+        Slope used on the current-only path (default 1.45); ignored by the tip fit.
+    use_tip : bool
+        Fit through the tip angle when the run has it.
+    bootstrap : int
+        Replicates of a bootstrap over cycles for the uncertainties.
+    seed : int
+        Seed of the bootstrap.
+    filter_hz : float or None
+        Cut-off of the current's low-pass (None: use the current as recorded).
+
+    Returns
+    -------
+    Identification
+
+    Raises
+    ------
+    IdentificationError
+        When the record cannot identify a knob: says what is missing, or which parameters it
+        cannot fix and why.
+    """
+    where = f"{run.source}: " if run.source else ""
+    if omega is not None and not (math.isfinite(float(omega)) and float(omega) > 0):
+        raise IdentificationError(f"omega must be a positive number, got {omega}")
+    if bootstrap < 0:
+        raise IdentificationError(f"bootstrap must be >= 0, got {bootstrap}")
+    ks = _knob_list(run, knobs, use_tip)
+    fits: dict[int, KnobFit] = {}
+    for k in ks:
+        fits[k] = _identify_knob(run, k, omega, use_tip, int(bootstrap), int(seed), filter_hz, where)
+    methods = sorted({f.method for f in fits.values()})
+    meta = {"method": methods[0] if len(methods) == 1 else
+            ",".join(f"{k}:{f.method}" for k, f in fits.items())}
+    model = Model({k: f.model for k, f in fits.items()}, meta=meta,
+                  identification={k: f.ident for k, f in fits.items() if f.ident is not None})
+    return Identification(fits, model)
+
+
+def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstrap: int, seed: int,
+                   filter_hz: float | None, where: str) -> KnobFit:
+    yname, cname = f"y{k}", f"c{k}"
+    tip = use_tip and yname in run
+    chk = check_sweep(run, k, need_current=not tip)
+    q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
+    t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
+    c = None
+    if cname in run and np.ptp(run[cname]) > 1e-9 * max(1.0, float(np.max(np.abs(run[cname])))):
+        fs = run.sample_rate if "t" in run else None
+        c = condition(np.asarray(run[cname], float), fs, filter_hz)
+    reading = read_current(q, c, t, chk) if c is not None else None
+    warnings: list[str] = []
+    where_k = f"{where}knob {k}"
+    if tip:
+        y = np.asarray(run[yname], float)
+        starts = ()
+        fit = fit_tip(q, y, starts, keep=chk.reversals)
+        if fit.unidentified:
+            raise IdentificationError(
+                f"{where_k}: the record cannot fix " + "; ".join(
+                    f"{name} ({why})" for name, why in fit.unidentified.items()))
+        model, stderr = fit.model, dict(fit.stderr)
+        if bootstrap > 0:
+            sd = bootstrap_tip(fit, q, y, chk, bootstrap, np.random.default_rng(seed))
+            stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS}
+        rmse = fit.rmse
+        method = "tip"
+        if reading is not None:
+            for side, name in (("pos", "d_pos"), ("neg", "d_neg")):
+                e = reading.edges.get(side)
+                if e is not None and abs(e - getattr(model, name)) > max(1.0, 3 * stderr[name]):
+                    warnings.append(f"{where_k}: the current shows the {'positive' if side == 'pos' else 'negative'} "
+                                    f"tendon taken up at {e:.2f} deg, the tip's {name} is "
+                                    f"{getattr(model, name):.2f} deg")
+    else:
+        model, stderr = _model_from_current(reading, omega, where_k)
+        rmse = None
+        if yname in run:
+            rmse = float(np.sqrt(np.mean((model.forward(q, float(run[yname][0])) - run[yname]) ** 2)))
+        fit = None
+        method = "current"
+    ident = None
+    if c is not None:
+        ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr)
+    return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
+                   n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
+                   tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))
+
+
+def _heights_assumed(d_pos: float, d_neg: float, b_pos: float, b_neg: float,
+                     omega: float) -> tuple[float, float]:
+    """Dead-zone heights when no tip angle was measured (see :func:`identify`)."""
+    dh = max(0.5 * (b_pos + b_neg), max(b_pos, b_neg) - (d_pos - d_neg), 0.0)
+    return -0.5 * omega * dh, 0.5 * omega * dh
+
+
+def _model_from_current(reading: CurrentReading | None, omega: float | None,
+                        where_k: str) -> tuple[KnobModel, dict[str, float]]:
+    sides = {"pos": "positive", "neg": "negative"}
+    missing_edges = [s for s in ("pos", "neg") if reading is None or s not in reading.edges]
+    if missing_edges:
+        side = sides[missing_edges[0]]
+        raise IdentificationError(
+            f"{where_k}: the motor current never clearly shows the {side} tendon taken up (no jump in "
+            f"its slope on a stretch that moves {side} through the dead zone): sweep further past the "
+            "edge, or record the tip angle")
+    missing_b = [s for s in ("pos", "neg") if s not in reading.backlash]
+    if missing_b:
+        names = ", ".join(f"b_{s}" for s in missing_b)
+        raise IdentificationError(
+            f"{where_k}: the current cannot fix {names}: after a reversal it shows no backlash plateau "
+            "(it unloads at once, as a current that follows the tendon's stretch does); identify with "
+            "the tip angle measured")
+    d_pos, d_neg = reading.edges["pos"], reading.edges["neg"]
+    if d_pos < d_neg:
+        raise IdentificationError(
+            f"{where_k}: the current's edges cross (positive tendon taken up at {d_pos:.2f} deg, negative "
+            f"at {d_neg:.2f} deg): no dead zone to identify")
+    b_pos, b_neg = max(reading.backlash["pos"], 0.0), max(reading.backlash["neg"], 0.0)
+    om = PAPER_OMEGA if omega is None else float(omega)
+    h_pos, h_neg = _heights_assumed(d_pos, d_neg, b_pos, b_neg, om)
+    try:
+        model = KnobModel(d_pos=d_pos, d_neg=d_neg, b_pos=b_pos, b_neg=b_neg, omega=om,
+                          h_pos=h_pos, h_neg=h_neg)
+    except ModelError as exc:  # pragma: no cover - the heights are chosen to keep it valid
+        raise IdentificationError(f"{where_k}: the current gives no valid model ({exc})") from None
+    stderr = {"d_pos": reading.edges_se["pos"], "d_neg": reading.edges_se["neg"],
+              "b_pos": reading.backlash_se["pos"], "b_neg": reading.backlash_se["neg"]}
+    return model, stderr
+
+
+def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: TipFit | None,
+            reading: CurrentReading | None, chk: SweepCheck, rmse: float | None,
+            stderr: Mapping[str, float]) -> KnobIdentification:
+    """What Algorithm 1 needs of this knob's current, read where the model puts the tendons."""
+    dq = np.gradient(q, t) if t.size > 1 else np.zeros_like(q)
+    lo, hi = model.d_neg + 0.5, model.d_pos - 0.5
+    if hi <= lo:
+        lo, hi = model.d_neg, model.d_pos
+    slack = (q >= lo) & (q <= hi)
+    if fit is not None:
+        # on a dead-zone flat of the fitted tip: neither tendon carries the tip
+        z = z_path(q, (model.d_neg, model.d_pos, model.b_pos, model.b_neg,
+                       (model.h_neg - model.h_pos) / model.omega), fit.z_init)
+        half = 0.5 * (model.h_neg - model.h_pos) / model.omega
+        slack &= np.abs(np.abs(z) - half) < 1e-9 * max(1.0, abs(half))
+    rising, falling = slack & (dq > 0), slack & (dq < 0)
+    no_rise = float(np.median(c[rising])) if rising.sum() >= 5 else None
+    no_fall = float(np.median(c[falling])) if falling.sum() >= 5 else None
+    known = [v for v in (no_rise, no_fall) if v is not None]
+    if reading is not None and not known:
+        known = list(reading.no_load.values())
+    c_dz = float(np.mean(known)) if known else float(np.median(c[slack])) if slack.any() else float(np.median(c))
+    # loaded slope: straight-line dC/dq past each edge, along the stretch's motion
+    slopes = []
+    for a, b, d in chk.segments:
+        qq, cc = q[a:b + 1], c[a:b + 1]
+        m = qq > model.d_pos + 1.0 if d > 0 else qq < model.d_neg - 1.0
+        if m.sum() >= 8 and np.ptp(qq[m]) >= 1.0:
+            slopes.append(float(np.polyfit(qq[m], cc[m], 1)[0]))
+    if slopes:
+        slope_loaded = abs(float(np.median(slopes)))
+    elif reading is not None and math.isfinite(reading.loaded_slope):
+        slope_loaded = abs(reading.loaded_slope)
+    else:
+        slope_loaded = float(np.ptp(c)) / max(float(np.ptp(q)), 1e-9)
+    slope_dz = _dead_zone_slope(q, c, chk, lo, hi)
+    noise = reading.noise if reading is not None else None
+    return KnobIdentification(
+        slope_dead_zone=slope_dz, slope_loaded=slope_loaded, q_min=chk.q_min, q_max=chk.q_max,
+        rmse=rmse, stderr={k: v for k, v in stderr.items() if math.isfinite(v)}, current_dead_zone=c_dz,
+        current_noise=noise, no_load_rising=no_rise, no_load_falling=no_fall,
+        current_edge_pos=None if reading is None else reading.edges.get("pos"),
+        current_edge_neg=None if reading is None else reading.edges.get("neg"))
+
+
+def _dead_zone_slope(q: np.ndarray, c: np.ndarray, chk: SweepCheck, lo: float, hi: float) -> float:
+    """Typical ``|dC/dq|`` the way a stepping search sees it inside the dead zone: the slope of
+    the current over 2 deg of knob, noise included (the floor of Algorithm 1's threshold)."""
+    slopes = []
+    for a, b, _ in chk.segments:
+        qq, cc = q[a:b + 1], c[a:b + 1]
+        m = (qq >= lo) & (qq <= hi)
+        if m.sum() < 8:
+            continue
+        order = np.argsort(qq[m])
+        x, v = qq[m][order], cc[m][order]
+        edges = np.arange(x[0], x[-1] + 2.0, 2.0)
+        for e0 in edges[:-1]:
+            w = (x >= e0) & (x < e0 + 2.0)
+            if w.sum() >= 4 and np.ptp(x[w]) > 1.0:
+                slopes.append(abs(float(np.polyfit(x[w], v[w], 1)[0])))
+    if slopes:
+        return float(np.median(slopes))
+    return float(np.median(np.abs(np.diff(c)))) / max(float(np.median(np.abs(np.diff(q)))), 1e-9)
+
+
+# --------------------------------------------------------------------------------------------
+# figure
+# --------------------------------------------------------------------------------------------
+def plot_identification(run: Run, result: Identification, path) -> None:
+    """Draw each knob's measured loop against the identified model (like Fig. 4 of the paper).
+
+    Left: tip angle against knob angle, measured (when the run has it) and predicted; right:
+    motor current against knob angle (when the run has it), with the loading edges the current
+    showed. The identified dead-zone edges (solid) are marked on both. Written atomically as PNG
+    with matplotlib's ``Figure`` API (no global backend switch).
+    """
+    from matplotlib.figure import Figure
+
+    from ..io import atomic_write
+    from ..metrics import figure_bytes
+
+    ks = sorted(result.fits)
+    fig = Figure(figsize=(11, 4.2 * len(ks)))
+    axes = fig.subplots(len(ks), 2, squeeze=False)
+    for row, k in zip(axes, ks):
+        fit = result.fits[k]
+        m = fit.model
+        q = np.asarray(run[f"q{k}"], float)
+        has_y = f"y{k}" in run
+        y0 = float(run[f"y{k}"][0]) if has_y else 0.0
+        ax = row[0]
+        if has_y:
+            ax.plot(q, run[f"y{k}"], color="0.6", lw=1.0, label="measured")
+        ax.plot(q, m.forward(q, y0), color="C3", lw=1.2, label=f"model ({fit.method})")
+        ax.set_xlabel(f"knob angle q{k} (deg)")
+        ax.set_ylabel(f"tip angle y{k} (deg)")
+        title = (f"knob {k}: d_pos={m.d_pos:.2f} d_neg={m.d_neg:.2f} b_pos={m.b_pos:.2f} "
+                 f"b_neg={m.b_neg:.2f} omega={m.omega:.3f}")
+        if fit.rmse is not None:
+            title += f"  RMSE={fit.rmse:.2f} deg"
+        ax.set_title(title, fontsize=9)
+        ax2 = row[1]
+        if f"c{k}" in run:
+            ax2.plot(q, run[f"c{k}"], color="0.6", lw=1.0, label="measured")
+            if fit.current is not None:
+                for side, e in fit.current.edges.items():
+                    ax2.axvline(e, color="C1", ls="--", lw=1.0,
+                                label="tendon taken up (current)" if side == "pos" else None)
+            if fit.ident is not None:
+                ax2.set_title(f"knob {k}: current slope in dead zone {fit.ident.slope_dead_zone:.3g}, "
+                              f"loaded {fit.ident.slope_loaded:.3g} mA/deg", fontsize=9)
+        else:
+            ax2.text(0.5, 0.5, "no motor current recorded", ha="center", va="center",
+                     transform=ax2.transAxes)
+        ax2.set_xlabel(f"knob angle q{k} (deg)")
+        ax2.set_ylabel(f"motor current c{k} (mA)")
+        for a in (ax, ax2):
+            a.axvline(m.d_pos, color="C0", lw=1.0, label="dead-zone edges d_neg, d_pos")
+            a.axvline(m.d_neg, color="C0", lw=1.0)
+            a.grid(alpha=0.3)
+            a.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    data = figure_bytes(fig, "png")
+    atomic_write(path, lambda f: f.write(data))

@@ -155,7 +155,7 @@ def decimation_index(q: np.ndarray, limit: int, keep: np.ndarray | None = None) 
     if n <= limit:
         return np.arange(n)
     stride = int(math.ceil(n / limit))
-    extra = find_reversals(q, tol=0.0)[0] if keep is None else np.asarray(keep, dtype=np.int64)
+    extra = find_reversals(q, tol=1e-3 * float(np.ptp(q)))[0] if keep is None else np.asarray(keep, dtype=np.int64)
     return np.union1d(np.arange(0, n, stride), np.concatenate([extra, [n - 1]]))
 
 

@@ -45,6 +45,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from ..model import KnobModel
 from .sweep import decimation_index
@@ -60,6 +61,14 @@ SEARCH_SAMPLES = 1200
 
 N_STARTS = 6
 """Distinct grid points refined by the local optimiser."""
+
+FLAT_SAMPLES = 2
+"""Fewest samples the fitted loop must put on a dead-zone flat for its edge to count as fixed."""
+
+FLAT_CONTRAST = 4.0
+"""How clearly a dead-zone flat must stand apart from the loaded lines either side of it:
+``omega * width * sqrt(samples on it) >= FLAT_CONTRAST * noise`` (the step between the two
+lines, averaged over the samples that see it, in units of the tip's noise)."""
 
 # theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
 _LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
@@ -145,6 +154,71 @@ def _batch_kernel(q, y, cands, out):
         out[m] = best
 
 
+@njit(cache=True)
+def _z_jac_kernel(q, dn, w, fp, fn, dh, z_init, z_out, jac):
+    # z and its exact derivatives with respect to (d_neg, width, f_pos, f_neg, delta, z_init):
+    # a clamped sample takes the derivative of the envelope that clamps it, a held one keeps the
+    # previous sample's (forward-mode sensitivities through the recursion)
+    s = w + dh
+    bn = fn * s
+    bp = fp * s
+    dp = dn + w
+    dhp = dn + bn - dh
+    dhn = dp - bp + dh
+    half = 0.5 * dh
+    z = z_init
+    g0 = 0.0
+    g1 = 0.0
+    g2 = 0.0
+    g3 = 0.0
+    g4 = 0.0
+    g5 = 1.0
+    for i in range(q.shape[0]):
+        u = q[i]
+        lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+        hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+        if z < lo:
+            z = lo
+            # d lo = -d(dh)/2 - [u < dhp] d(dhp) - [u > dp] d(dp)
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            g3 = 0.0
+            g4 = -0.5
+            if u < dhp:      # d(dhp) = (1, fn, 0, s, fn - 1)
+                g0 -= 1.0
+                g1 -= fn
+                g3 -= s
+                g4 -= fn - 1.0
+            if u > dp:       # d(dp) = (1, 1, 0, 0, 0)
+                g0 -= 1.0
+                g1 -= 1.0
+            g5 = 0.0
+        if z > hi:
+            z = hi
+            # d hi = d(dh)/2 - [u < dn] d(dn) - [u > dhn] d(dhn)
+            g0 = 0.0
+            g1 = 0.0
+            g2 = 0.0
+            g3 = 0.0
+            g4 = 0.5
+            if u < dn:       # d(dn) = (1, 0, 0, 0, 0)
+                g0 -= 1.0
+            if u > dhn:      # d(dhn) = (1, 1 - fp, -s, 0, 1 - fp)
+                g0 -= 1.0
+                g1 -= 1.0 - fp
+                g2 += s
+                g4 -= 1.0 - fp
+            g5 = 0.0
+        z_out[i] = z
+        jac[i, 0] = g0
+        jac[i, 1] = g1
+        jac[i, 2] = g2
+        jac[i, 3] = g3
+        jac[i, 4] = g4
+        jac[i, 5] = g5
+
+
 def z_path(q: np.ndarray, geometry, z_init: float) -> np.ndarray:
     """``z`` of the knob-degree form for geometry ``(d_neg, d_pos, b_pos, b_neg, delta)``."""
     out = np.empty(q.size)
@@ -215,22 +289,15 @@ def predict(th: np.ndarray, q: np.ndarray) -> np.ndarray:
 # --------------------------------------------------------------------------------------------
 def _candidates(q_min: float, q_max: float) -> np.ndarray:
     span = q_max - q_min
-    centres = np.linspace(q_min + 0.04 * span, q_max - 0.04 * span, 19)
-    widths = np.concatenate([[0.0], np.geomspace(0.015 * span, 0.9 * span, 13)])
-    fracs = np.array([0.0, 0.12, 0.3, 0.5, 0.75, 1.0])
+    centres = np.linspace(q_min + 0.04 * span, q_max - 0.04 * span, 17)
+    widths = np.concatenate([[0.0], np.geomspace(0.015 * span, 0.9 * span, 12)])
+    fracs = np.array([0.0, 0.15, 0.35, 0.6, 1.0])
     deltas = np.array([0.0, 0.04, 0.12, 0.3]) * span
-    rows = []
-    for c in centres:
-        for w in widths:
-            dn, dp = c - 0.5 * w, c + 0.5 * w
-            if dn < q_min or dp > q_max:
-                continue
-            for dh in deltas:
-                s = w + dh
-                for fp in fracs:
-                    for fn in fracs:
-                        rows.append((dn, dp, fp * s, fn * s, dh))
-    return np.unique(np.array(rows), axis=0)
+    c, w, dh, fp, fn = (a.ravel() for a in np.meshgrid(centres, widths, deltas, fracs, fracs, indexing="ij"))
+    dn, dp = c - 0.5 * w, c + 0.5 * w
+    ok = (dn >= q_min) & (dp <= q_max)
+    s = w + dh
+    return np.column_stack([dn, dp, fp * s, fn * s, dh])[ok]
 
 
 def _linear_part(z: np.ndarray, y: np.ndarray) -> tuple[float, float]:
@@ -280,14 +347,28 @@ def _residuals(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
     return predict(th, q) - y
 
 
+def _residual_jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Exact d(residual)/d(theta), (n, 8), from the recursion's sensitivities."""
+    z = np.empty(q.size)
+    jz = np.empty((q.size, 6))
+    _z_jac_kernel(q, *map(float, th[:5]), float(th[7]), z, jz)
+    omega = th[5]
+    jac = np.empty((q.size, 8))
+    jac[:, :5] = omega * jz[:, :5]
+    jac[:, 5] = z
+    jac[:, 6] = 1.0
+    jac[:, 7] = omega * jz[:, 5]
+    return jac
+
+
 def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float, loss: str = "soft_l1"):
     inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
     th0 = np.minimum(np.maximum(np.asarray(th0, float), _LO + inner), _HI - inner)
     span = float(np.ptp(q)) or 1.0
     x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1,
                         max(1.0, f_scale), 0.05 * span])
-    return least_squares(_residuals, th0, bounds=(_LO, _HI), args=(q, y), loss=loss,
-                         f_scale=f_scale, x_scale=x_scale, diff_step=1e-7, max_nfev=600)
+    return least_squares(_residuals, th0, jac=_residual_jacobian, bounds=(_LO, _HI), args=(q, y),
+                         loss=loss, f_scale=f_scale, x_scale=x_scale, max_nfev=400)
 
 
 def _robust_sd(r: np.ndarray) -> float:
@@ -381,46 +462,35 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     cands = _candidates(q_min, q_max)
     sse = np.empty(cands.shape[0])
     _batch_kernel(qs, ys, cands, sse)
-    thetas = [_start_from_geometry(g, qf, yf) for g in _distinct_best(cands, sse, N_STARTS, span)]
+    thetas = [_start_from_geometry(g, qs, ys) for g in _distinct_best(cands, sse, N_STARTS, span)]
     for m in starts:
         zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
         thetas.append(theta_from_model(m, zi))
 
     # noise scale for the robust loss: the best start's residual spread
-    r0 = min((_residuals(th, qf, yf) for th in thetas), key=lambda r: float(r @ r))
+    r0 = min((_residuals(th, qs, ys) for th in thetas), key=lambda r: float(r @ r))
     f_scale = max(3.0 * _robust_sd(r0), 1e-6 * max(1.0, float(np.ptp(y))))
-    best = None
-    for th in thetas:
-        res = _refine(th, qf, yf, f_scale)
-        if best is None or res.cost < best.cost:
-            best = res
-    # a second pass with the scale of the winner's own residuals
-    sd = _robust_sd(best.fun)
-    f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
-    best = _refine(best.x, qf, yf, f_scale)
+    with threadpool_limits(limits=1):  # small dense algebra: threads only fight on 2 cores
+        # every start refined on the search's subset, the winner on the fit's samples
+        best = None
+        for th in thetas:
+            res = _refine(th, qs, ys, f_scale)
+            if best is None or res.cost < best.cost:
+                best = res
+        # a second pass with the scale of the winner's own residuals
+        sd = _robust_sd(_residuals(best.x, qf, yf))
+        f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
+        best = _refine(best.x, qf, yf, f_scale)
     th = best.x
     model = model_of(th)
     resid = _residuals(th, qf, yf)
     noise = _robust_sd(resid)
     rmse = float(np.sqrt(np.mean((model.forward(q, float(y[0])) - y) ** 2)))
-    stderr, tau = _stderr(th, qf, yf, resid, noise)
+    with threadpool_limits(limits=1):
+        stderr, tau = _stderr(th, qf, yf, resid, noise)
     unident = _unidentified(th, model, qf, stderr, span, noise)
     return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
                   theta=th, unidentified=unident, n_samples=int(qf.size))
-
-
-def _jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
-    # central differences of the residuals; steps a small fraction of each parameter's scale
-    span = float(np.ptp(q)) or 1.0
-    steps = np.array([1e-4 * span, 1e-4 * span, 1e-4, 1e-4, 1e-4 * span, 1e-5 * max(th[5], 1e-3),
-                      1e-4 * max(1.0, abs(th[6])), 1e-4 * span])
-    jac = np.empty((q.size, th.size))
-    for j in range(th.size):
-        hi, lo = th.copy(), th.copy()
-        hi[j] = min(hi[j] + steps[j], _HI[j])
-        lo[j] = max(lo[j] - steps[j], _LO[j])
-        jac[:, j] = (_residuals(hi, q, y) - _residuals(lo, q, y)) / (hi[j] - lo[j])
-    return jac
 
 
 def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
@@ -428,27 +498,27 @@ def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
     inl = np.abs(resid - np.median(resid)) <= max(4.0 * noise, 1e-12)
     r = resid[inl]
     tau = autocorrelation_time(r)
-    jac = _jacobian(th, q, y)[inl]
+    jac = _residual_jacobian(th, q, y)[inl]
     dof = max(r.size - th.size, 1)
     s2 = float(r @ r) / dof * tau
-    jtj = jac.T @ jac
-    # parameters with no influence on the residuals are not estimable: infinite variance
-    dead = np.sqrt(np.diag(jtj)) <= 1e-9 * max(1.0, float(np.sqrt(np.max(np.diag(jtj)))))
-    cov = np.full((th.size, th.size), np.nan)
-    live = ~dead
-    if live.any():
-        sub = jtj[np.ix_(live, live)]
-        cov[np.ix_(live, live)] = np.linalg.pinv(sub) * s2
+    # scale the columns, then read the null directions off the eigenvectors: a pseudo-inverse
+    # would hand a parameter the record cannot fix a finite (and meaningless) variance
+    norms = np.sqrt(np.sum(jac * jac, axis=0))
+    norms = np.where(norms > 0, norms, 1.0)
+    js = jac / norms
+    lam, vec = np.linalg.eigh(js.T @ js)
+    null = lam <= 1e-9 * max(float(lam[-1]), 1e-300)
+    weak = np.any(np.abs(vec[:, null]) > 0.05, axis=1) if null.any() else np.zeros(th.size, bool)
+    inv = (vec[:, ~null] / lam[~null]) @ vec[:, ~null].T
+    cov = inv / np.outer(norms, norms) * s2
     g = _params_jacobian(th)
     out = {}
     for i, name in enumerate(PARAMS):
         row = g[i]
-        if np.any(dead & (np.abs(row) > 0)):
+        if np.any(weak & (np.abs(row) > 0)):
             out[name] = math.inf
             continue
-        c = cov[np.ix_(live, live)]
-        v = float(row[live] @ c @ row[live])
-        out[name] = math.sqrt(max(v, 0.0))
+        out[name] = math.sqrt(max(float(row @ cov @ row), 0.0))
     return out, tau
 
 
@@ -473,6 +543,21 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
             out[name] = (f"the knob never moves the tip {side} past the dead zone: the fitted edge "
                          f"{edge:.2f} deg is within {stretch:.2f} deg of the sweep's reach "
                          f"({reach:.2f} deg); sweep further")
+    # an edge is where the tip leaves its dead-zone flat: without samples on that flat its level,
+    # and with it the edge, can slide along the loaded line
+    on_up_flat = np.abs(z + 0.5 * dh) < 1e-9 * max(1.0, span)
+    on_dn_flat = np.abs(z - 0.5 * dh) < 1e-9 * max(1.0, span)
+    for name, mask, lo_, hi_, way in (("d_pos", on_up_flat, dhat_pos, d_pos, "rising"),
+                                      ("d_neg", on_dn_flat, d_neg, dhat_neg, "falling")):
+        if name in out:
+            continue
+        m = mask & (q >= lo_) & (q <= hi_)
+        contrast = model.omega * (hi_ - lo_) * math.sqrt(m.sum()) / max(noise, 1e-12)
+        if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST:
+            out[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
+                         f"sample(s) of the fitted loop, a step of {model.omega * (hi_ - lo_):.2f} deg of tip: too little "
+                         "against the tracker's noise to place the edge apart from the "
+                         "dead-zone height; sweep slower or sample faster")
     # backlash: after a reversal beyond the edge plus Delta the tip leaves its plateau on the
     # unloading slope, which is what fixes the plateau's width
     dn_unload = (q > dhat_neg) & np.isclose(z, 0.5 * dh + (q - dhat_neg), atol=1e-9) & (dq < 0)
@@ -492,3 +577,41 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
             out[name] = (f"the record leaves it undetermined (one-sigma uncertainty "
                          f"{s:.3g}{'' if name == 'omega' else ' deg'})")
     return out
+
+
+def bootstrap_tip(fit: TipFit, q: np.ndarray, y: np.ndarray, chk, n: int,
+                  rng: np.random.Generator) -> dict[str, float]:
+    """Standard deviation of each parameter over ``n`` refits that resample whole cycles.
+
+    Cycles run from one top reversal to the next; each replicate weights every sample by how
+    often its cycle was drawn and refits from the fit's own solution (so it measures spread,
+    not the global search again).
+    """
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    idx = decimation_index(q, MAX_SAMPLES, chk.reversals)
+    qf, yf = q[idx], y[idx]
+    tops = chk.reversals[chk.tops]
+    cyc = np.searchsorted(tops, idx, side="right")
+    ids = np.unique(cyc)
+    f_scale = max(3.0 * fit.noise, 1e-6)
+    reps = []
+    with threadpool_limits(limits=1):
+        for _ in range(int(n)):
+            pick = rng.choice(ids, size=ids.size, replace=True)
+            w = np.bincount(np.searchsorted(ids, pick), minlength=ids.size)[np.searchsorted(ids, cyc)]
+            sw = np.sqrt(w.astype(float))
+
+            def fun(th):
+                return _residuals(th, qf, yf) * sw
+
+            def jac(th):
+                return _residual_jacobian(th, qf, yf) * sw[:, None]
+
+            inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
+            th0 = np.minimum(np.maximum(fit.theta, _LO + inner), _HI - inner)
+            res = least_squares(fun, th0, jac=jac, bounds=(_LO, _HI), loss="soft_l1", f_scale=f_scale,
+                                max_nfev=200)
+            reps.append(_params(res.x))
+    sd = np.std(np.array(reps), axis=0, ddof=1) if len(reps) > 1 else np.zeros(len(PARAMS))
+    return {name: float(v) for name, v in zip(PARAMS, sd)}

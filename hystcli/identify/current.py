@@ -1,0 +1,392 @@
+"""What the motor current of a sweep says: the dead-zone edges, the backlash plateaus, the levels.
+
+Read per monotone stretch of the knob (:attr:`SweepCheck.segments`), on the current binned by
+knob angle (the median of each bin, so spikes do not count) and split into straight pieces by
+an exact least-squares segmentation. Physics, not one plant's current law, decides what a piece
+is (DESIGN.md section 4):
+
+* the **loading edge** of a stretch is where a tendon is taken up: the slope (dC/dq along the
+  motion, loading-positive) jumps, and after it no flat piece follows (only the loaded slope,
+  which may stiffen or meet a wall). Among the jumps that qualify, the one out of the flattest
+  piece is the edge: a wall's jump starts from a loaded slope, an unloading tendon's arrival
+  is followed by the dead zone's flat. Ascending stretches give :math:`D_{pos}`, descending ones
+  :math:`D_{neg}`; the kink is then placed by :func:`hystcli.current.kink_fit` (a stiffening
+  cable allowed). Pretension (a sloped dead zone) is a smaller jump, not a missing one.
+* the **backlash plateau**: after a reversal with the tendon loaded, a current that holds (a
+  flat piece, possibly after an immediate drop) before it unloads shows the backlash width
+  :math:`B`; a current that unloads at once (the tendon's stretch) does not, and the reading
+  says so rather than guess.
+* the **levels**: the no-load current of each direction (the motor's Coulomb friction moves it
+  with the direction of motion), the loaded slope and the dead zone's slope, which Algorithm 1
+  needs for its thresholds.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+from numba import njit
+
+from ..current import Kink, kink_fit, robust_noise
+from .sweep import SweepCheck
+
+N_PIECES = 5
+"""Straight pieces a stretch is split into (plateau, unloading, dead zone, loading, a wall or a
+stiffening cable)."""
+
+JUMP_RATIO = 0.6
+"""A piece counts as flatter than the next one when its slope is below this share of the next."""
+
+FLAT_AFTER = 0.35
+"""A later piece flatter than this share of the loaded slope (or than the piece before the jump,
+whichever is steeper, with a 20 % margin) is a dead zone still to come: the jump was a tendon
+unloading, or the end of a backlash plateau."""
+
+END_PIECE = 1.5
+"""A last piece shorter than this (deg) is the rounding of the reversal, not a feature."""
+
+MIN_CLARITY = 6.0
+"""A kink counts when its jump in slope exceeds this many standard errors."""
+
+
+@dataclass(frozen=True)
+class Stretch:
+    """The current's reading on one monotone stretch of the knob.
+
+    Attributes
+    ----------
+    start, stop : int
+        Sample indices of the stretch.
+    direction : int
+        +1 ascending, -1 descending.
+    from_reversal : bool
+        The stretch begins at a reversal (not at the record's first sample).
+    edge : Kink or None
+        The loading edge, when the stretch passes one.
+    dead_level : float or None
+        Current just before the loading edge (no tendon taut).
+    dead_slope, loaded_slope : float or None
+        dC/dq (loading-positive) of the pieces either side of the edge.
+    plateau : float or None
+        Travel from the reversal over which the current holds before it unloads (deg).
+    """
+
+    start: int
+    stop: int
+    direction: int
+    from_reversal: bool
+    edge: Kink | None = None
+    dead_level: float | None = None
+    dead_slope: float | None = None
+    loaded_slope: float | None = None
+    plateau: float | None = None
+
+
+@dataclass(frozen=True)
+class CurrentReading:
+    """The current's reading of a whole sweep (medians over the stretches that show each thing).
+
+    Attributes
+    ----------
+    edges : dict
+        ``"pos"``/``"neg"`` -> loading edge (deg) when some stretch shows it.
+    edges_se : dict
+        Their standard errors (deg): the spread over stretches, never below the kink fits' own.
+    backlash : dict
+        ``"pos"``/``"neg"`` -> plateau width (deg) when the current shows one.
+    backlash_se : dict
+    no_load : dict
+        ``+1``/``-1`` -> no-load current while moving that way (mA).
+    loaded_slope, dead_slope : float
+        Typical dC/dq with a tendon taut / with none (mA/deg, loading-positive).
+    noise : float
+        Sample-to-sample noise of the conditioned current (mA).
+    stretches : tuple of Stretch
+    """
+
+    edges: dict = field(default_factory=dict)
+    edges_se: dict = field(default_factory=dict)
+    backlash: dict = field(default_factory=dict)
+    backlash_se: dict = field(default_factory=dict)
+    no_load: dict = field(default_factory=dict)
+    loaded_slope: float = math.nan
+    dead_slope: float = math.nan
+    noise: float = math.nan
+    stretches: tuple = ()
+
+    @property
+    def no_load_level(self) -> float:
+        """The no-load current halfway between the two directions' (mA)."""
+        v = list(self.no_load.values())
+        return float(np.mean(v)) if v else math.nan
+
+
+@njit(cache=True)
+def _segment_dp(x, v, nseg, minlen):
+    # Optimal split of (x, v) into nseg independent straight lines (least squares), by dynamic
+    # programming over prefix sums: exact, and cheap for the ~100-200 bins of one branch.
+    n = x.shape[0]
+    s0 = np.zeros(n + 1)
+    sx = np.zeros(n + 1)
+    sy = np.zeros(n + 1)
+    sxx = np.zeros(n + 1)
+    sxy = np.zeros(n + 1)
+    syy = np.zeros(n + 1)
+    for i in range(n):
+        s0[i + 1] = s0[i] + 1.0
+        sx[i + 1] = sx[i] + x[i]
+        sy[i + 1] = sy[i] + v[i]
+        sxx[i + 1] = sxx[i] + x[i] * x[i]
+        sxy[i + 1] = sxy[i] + x[i] * v[i]
+        syy[i + 1] = syy[i] + v[i] * v[i]
+    inf = 1e300
+    best = np.full((nseg + 1, n + 1), inf)
+    arg = np.zeros((nseg + 1, n + 1), dtype=np.int64)
+    best[0, 0] = 0.0
+    for k in range(1, nseg + 1):
+        for j in range(k * minlen, n + 1):
+            for i in range((k - 1) * minlen, j - minlen + 1):
+                if best[k - 1, i] >= inf:
+                    continue
+                m = s0[j] - s0[i]
+                ax = sx[j] - sx[i]
+                ay = sy[j] - sy[i]
+                cxx = sxx[j] - sxx[i] - ax * ax / m
+                cxy = sxy[j] - sxy[i] - ax * ay / m
+                cyy = syy[j] - syy[i] - ay * ay / m
+                sse = cyy - (cxy * cxy / cxx if cxx > 1e-12 else 0.0)
+                if sse < 0.0:
+                    sse = 0.0
+                total = best[k - 1, i] + sse
+                if total < best[k, j]:
+                    best[k, j] = total
+                    arg[k, j] = i
+    bounds = np.zeros(nseg + 1, dtype=np.int64)
+    bounds[nseg] = n
+    j = n
+    for k in range(nseg, 0, -1):
+        j = arg[k, j]
+        bounds[k - 1] = j
+    return bounds
+
+
+
+def _bins(x: np.ndarray, c: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
+    k = np.floor((x - x.min()) / width).astype(np.int64)
+    order = np.argsort(k, kind="stable")
+    k, cs = k[order], c[order]
+    cuts = np.flatnonzero(np.diff(k)) + 1
+    groups = np.split(cs, cuts)
+    keys = k[np.concatenate([[0], cuts])]
+    centres = x.min() + (keys + 0.5) * width
+    return centres, np.array([float(np.median(g)) for g in groups])
+
+
+def _pieces(x: np.ndarray, v: np.ndarray, minlen: int) -> list[tuple[int, int, float, float]]:
+    """Split binned points into straight pieces: ``(first, stop, slope, level at first)``."""
+    n = x.size
+    k = max(1, min(N_PIECES, n // max(minlen, 1)))
+    bounds = _segment_dp(np.ascontiguousarray(x), np.ascontiguousarray(v), k, minlen)
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        xs, vs = x[a:b], v[a:b]
+        if b - a >= 2 and np.ptp(xs) > 0:
+            m, c0 = np.polyfit(xs, vs, 1)
+        else:
+            m, c0 = 0.0, float(vs.mean())
+        out.append((int(a), int(b), float(m), float(c0 + m * xs[0])))
+    return out
+
+
+SLOW = 0.25
+"""Samples of a stretch slower than this share of its peak speed are left out of its edge
+reading: where a sine sweep slows into its reversal the motor's Coulomb and viscous friction
+fade, and the current moves with the speed rather than the tendon."""
+
+GUARD_S = 0.075
+"""Time (s) at either end of a stretch left out of its edge reading: the 20 Hz low-pass (the
+lab's, or ours) rounds the corner a reversal makes in the current over about this long."""
+
+
+def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: int, direction: int,
+                 from_reversal: bool, noise: float) -> Stretch:
+    """Read one monotone stretch (see the module docstring)."""
+    d = direction
+    qq, cc, tt = q[start:stop + 1], c[start:stop + 1], t[start:stop + 1]
+    x = d * (qq - qq[0])                     # travel along the motion
+    travel = float(x.max())
+    out = Stretch(start, stop, d, from_reversal)
+    if travel < 2.0 or qq.size < 12:
+        return out
+    width = float(np.clip(travel / 80.0, 0.1, 0.5))
+    speed = np.abs(np.gradient(qq, tt))
+    fast = ((speed >= SLOW * float(np.percentile(speed, 95)))
+            & (tt >= tt[0] + GUARD_S) & (tt <= tt[-1] - GUARD_S))
+    # the plateau is read from the reversal on, the edge only where the knob moves briskly
+    xa, va = _bins(x, cc, width)
+    if fast.sum() < 12:
+        return out
+    xb, vb = _bins(x[fast], cc[fast], width)
+    if xb.size < 10:
+        return out
+    minlen = max(2, int(round(0.5 / width)))
+    pieces = _pieces(xb, vb, minlen)
+    # loading-positive slopes: with x = d (q - q0), dC/dq = d dC/dx
+    slopes = [d * m for (_, _, m, _) in pieces]
+    sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
+    edge_piece = _edge_piece(pieces, slopes, xb, sig)
+    plateau = None
+    if from_reversal and xa.size >= 10:
+        # from the reversal on (the slow start included): its own pieces, its own dead zone
+        pa = _pieces(xa, va, minlen)
+        sa = [d * m for (_, _, m, _) in pa]
+        plateau = _plateau(pa, sa, xa, sig, from_reversal, _dead_piece(pa, sa, xa, _edge_piece(pa, sa, xa, sig)))
+    if edge_piece is None:
+        return Stretch(start, stop, d, from_reversal, plateau=plateau)
+    j = edge_piece
+    a0 = pieces[j][0]
+    # the kink fit sees the flat piece and the loaded run up to a wall (the next qualifying jump)
+    stop_bin = xb.size
+    for jj in range(j + 2, len(pieces)):
+        if slopes[jj - 1] <= JUMP_RATIO * slopes[jj] and (slopes[jj] - slopes[jj - 1]) * (
+                xb[pieces[jj][1] - 1] - xb[pieces[jj][0]]) > 6 * sig:
+            stop_bin = pieces[jj][0]
+            break
+    lo_b, hi_b = pieces[j][0], pieces[j + 1][1] - 1
+    kink = kink_fit(qq[0] + d * xb[a0:stop_bin], vb[a0:stop_bin], d,
+                    lo=qq[0] + d * xb[max(lo_b, a0)], hi=qq[0] + d * xb[min(hi_b, stop_bin - 1)],
+                    curved=True, min_side=max(2, minlen // 2), resolution=width / 10.0)
+    if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
+        return Stretch(start, stop, d, from_reversal, plateau=plateau)
+    return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
+                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau)
+
+
+def _edge_piece(pieces, slopes, xb, sig) -> int | None:
+    """Index of the flat piece that the loading edge ends (see the module docstring)."""
+    n = len(pieces)
+    if n < 2:
+        return None
+    # the stretch must end loaded: its last piece rises clearly (or the one before a short last
+    # piece, the reversal's rounding)
+    def rises(k: int) -> bool:
+        p = pieces[k]
+        return slopes[k] > 0 and slopes[k] * (xb[p[1] - 1] - xb[p[0]] + 1e-9) > 6 * sig
+
+    short_last = xb[pieces[-1][1] - 1] - xb[pieces[-1][0]] < END_PIECE
+    if not (rises(n - 1) or (short_last and n > 1 and rises(n - 2))):
+        return None
+    best, best_pre = None, math.inf
+    for j in range(n - 1):
+        pre, post = slopes[j], slopes[j + 1]
+        if post <= 0 or pre > JUMP_RATIO * post:
+            continue
+        length = xb[pieces[j + 1][1] - 1] - xb[pieces[j + 1][0]] + 1e-9
+        if (post - pre) * length < 6 * sig:
+            continue
+        # nothing flat after it (a dead zone still to come means this was a tendon unloading);
+        # a short last piece is the reversal's rounding, not a dead zone
+        later = [k for k in range(j + 2, n)
+                 if not (k == n - 1 and xb[pieces[k][1] - 1] - xb[pieces[k][0]] < END_PIECE)]
+        floor = 1.2 * max(pre, FLAT_AFTER * post)
+        if any(slopes[k] <= floor for k in later):
+            continue
+        if pre <= best_pre:   # the flattest start; of equals the later one (the far side)
+            best, best_pre = j, pre
+    return best
+
+
+def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> float | None:
+    """Travel from a reversal to where the tendon starts unloading (the backlash), when it shows.
+
+    The stretch after a loaded reversal runs: the backlash phase (a plateau while the sheath
+    friction holds the load, or a steep fall while it flips sign, possibly after an immediate
+    drop), the unloading slope, the dead zone's flat (piece ``dead``). The backlash is read when
+    a piece before the unloading slope clearly differs from it; a current that unloads at once
+    (the tendon's stretch) shows none.
+    """
+    if not from_reversal or dead is None:
+        return None
+    # the dead zone may span several flat pieces: start from its first
+    if dead + 1 < len(slopes):
+        ref = slopes[dead + 1]          # the loaded slope after the dead zone
+        while dead > 1 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(ref, 1e-12):
+            dead -= 1
+    if dead < 2:
+        return None
+    # the unloading slope: the longest piece before the dead zone, with its neighbours of about
+    # the same slope (the segmentation may split it, or round its ends)
+    lengths = [xb[p[1] - 1] - xb[p[0]] for p in pieces]
+    ju = max(range(dead), key=lambda k: lengths[k])
+    unload = slopes[ju]
+    if not unload > 0:
+        return None
+    while ju > 0 and abs(slopes[ju - 1] - unload) < 0.4 * unload:
+        ju -= 1
+    length = sum(lengths[ju:dead])
+    if ju == 0 or not (length >= 1.0 and unload * length > 6 * sig):
+        return None
+    return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]]))
+
+
+def _dead_piece(pieces, slopes, xb, edge_piece: int | None) -> int | None:
+    """The dead zone's piece: the flat piece the loading edge ends, or else (a stretch that ends
+    in the dead zone) the flattest piece at least a degree long after the first."""
+    if edge_piece is not None:
+        return edge_piece
+    long_enough = [j for j in range(1, len(pieces)) if xb[pieces[j][1] - 1] - xb[pieces[j][0]] >= 1.0]
+    if not long_enough:
+        return None
+    j = min(long_enough, key=lambda k: abs(slopes[k]))
+    return j if abs(slopes[j]) <= FLAT_AFTER * max(max(slopes[:j]), 1e-12) else None
+
+
+def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -> CurrentReading:
+    """Read the loading edges, backlash plateaus and levels of a sweep's (conditioned) current.
+
+    Parameters
+    ----------
+    q, c, t : numpy.ndarray
+        Knob command (deg), conditioned motor current (:func:`hystcli.current.condition`), time (s).
+    chk : SweepCheck
+        The sweep's reversals.
+    """
+    q = np.asarray(q, float)
+    c = np.asarray(c, float)
+    t = np.asarray(t, float)
+    noise = robust_noise(c)
+    stretches = []
+    for i, (a, b, d) in enumerate(chk.segments):
+        stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
+    edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
+    for side, d in (("pos", +1), ("neg", -1)):
+        ks = [s.edge for s in stretches if s.direction == d and s.edge is not None]
+        at = np.array([k.at for k in ks])
+        off = np.abs(at - np.median(at)) > 1.0 if ks else np.zeros(0, bool)
+        # stretches that disagree (more than a third of them over a degree off) show no edge one
+        # can trust; a lone outlier among agreeing ones is left out
+        if ks and off.sum() * 3 <= at.size:
+            ks = [k for k, o in zip(ks, off) if not o]
+            at = at[~off]
+            se = np.array([k.se for k in ks])
+            edges[side] = float(np.median(at))
+            spread = float(1.2533 * np.std(at, ddof=1) / math.sqrt(at.size)) if at.size > 1 else 0.0
+            edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size))
+            levels[d] = float(np.median([k.level for k in ks]))
+        # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
+        pl = [s.plateau for s in stretches if s.direction == -d and s.plateau is not None]
+        arr = np.array(pl)
+        # stretches that disagree (more than a third off the median by over a degree) show no
+        # backlash one can trust
+        if arr.size and np.sum(np.abs(arr - np.median(arr)) > 1.0) * 3 <= arr.size:
+            arr = arr[np.abs(arr - np.median(arr)) <= 1.0]
+            backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
+            backlash_se["pos" if d > 0 else "neg"] = (float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size))
+                                                      if arr.size > 1 else 0.25)
+    loaded = [s.loaded_slope for s in stretches if s.loaded_slope is not None]
+    dead = [abs(s.dead_slope) for s in stretches if s.dead_slope is not None]
+    return CurrentReading(edges=edges, edges_se=edges_se, backlash=backlash, backlash_se=backlash_se,
+                          no_load=levels, loaded_slope=float(np.median(loaded)) if loaded else math.nan,
+                          dead_slope=float(np.median(dead)) if dead else math.nan, noise=noise,
+                          stretches=tuple(stretches))
