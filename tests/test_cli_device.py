@@ -234,9 +234,12 @@ def test_ctrl_c_on_hyst_play_returns_the_knob(tmp_path):
     assert runner.invoke(app, ["sweep", "-o", str(sweep), "--quiet"]).exit_code == 0
     out = tmp_path / "run.csv"
     with sim_robot() as path:
+        # SIGINT's default action, as a terminal gives it: a test run started in the background
+        # of a non-interactive shell ignores SIGINT, and a child would inherit that
         proc = subprocess.Popen([sys.executable, "-m", "hystcli", "play", str(sweep), "--port", path,
                                  "-o", str(out), "--timeout", TIMEOUT],
-                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True)
+                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
         try:
             # readiness: the line it prints after checking the whole file, before the first MOVE
             line = proc.stderr.readline()
