@@ -22,15 +22,23 @@ import signal
 import statistics
 import subprocess
 import sys
+import tempfile
 import time
 
 from hystcli.device import Device
 
 
 def one_run() -> dict[str, float]:
+    import hystcli
+
+    # the robot runs the hystcli this script imported (``python -m`` would put the current
+    # folder first on its path: a checkout there would shadow PYTHONPATH)
+    root = os.path.dirname(os.path.dirname(os.path.abspath(hystcli.__file__)))
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([root, os.environ.get("PYTHONPATH", "")]))
     t0 = time.monotonic()
-    proc = subprocess.Popen([sys.executable, "-m", "hystcli", "sim-robot", "--quiet"],
-                            stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    proc = subprocess.Popen([sys.executable, "-m", "hystcli", "sim-robot", "--quiet"], env=env,
+                            cwd=tempfile.gettempdir(), stdout=subprocess.PIPE,
+                            stderr=subprocess.DEVNULL, text=True)
     try:
         ready, _, _ = select.select([proc.stdout], [], [], 300)
         if not ready:
