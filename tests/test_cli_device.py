@@ -454,6 +454,7 @@ PORTLESS = "/nonexistent/tty"
     (["play", "X", "--port", PORTLESS, "-o", "Y", "--max-speed", "-5"], "--max-speed"),
     (["play", "X", "--port", PORTLESS, "-o", "Y", "--travel-limit", "inf"], "--travel-limit"),
     (["status", "--port", PORTLESS, "--timeout", "-1"], "--timeout"),
+    (["status", "--port", PORTLESS, "--baud", "-9600"], "--baud"),
     (["status", "--port", PORTLESS, "--format", "csv"], "--format"),
     (["home", "--port", PORTLESS, "--speed", "nan"], "--speed"),
     (["home", "--port", PORTLESS, "--speed", "500"], "--speed"),

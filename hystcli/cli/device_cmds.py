@@ -232,6 +232,8 @@ def play_cmd(
 def _open(port: str, baud: int, timeout: float) -> Any:
     from ..device import Device
 
+    if baud <= 0:  # pyserial's own refusal would come out as a link error (exit 1)
+        raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
     return Device(port, baud, timeout)
 
 
@@ -332,7 +334,7 @@ def jog_cmd(
         "--by", callback=finite, help="Relative angle, deg (signed).", show_default=False)],
     max_step: Annotated[float, typer.Option(
         "--max-step", callback=positive,
-        help=f"Largest |--by|, deg (default {JOG_MAX_STEP:g}: a nudge, not a move anywhere).")] = JOG_MAX_STEP,
+        help="Largest |--by|, deg: a jog is a nudge, not a move anywhere.")] = JOG_MAX_STEP,
     speed: MoveSpeedOpt = DEFAULT_MOVE_SPEED,
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,

@@ -14,7 +14,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL, Limits
+from ..safety import Limits
 
 
 def positive(value: float | None) -> float | None:
@@ -44,16 +44,16 @@ TimeoutOpt = Annotated[float, typer.Option(
          "dwell (a MOVE is answered on arrival).")]
 TravelLimitOpt = Annotated[float, typer.Option(
     "--travel-limit", callback=positive,
-    help=f"Largest |knob angle| any command may reach, deg (default {DEFAULT_TRAVEL:g}: half a "
-         "turn each way, beyond every command of the paper's protocol). A robot that announces a "
-         "tighter travel limit gets its own.")]
+    help="Largest |knob angle| any command may reach, deg. The default is half a turn each way, "
+         "beyond every command of the paper's protocol. A robot that announces a tighter travel "
+         "limit gets its own.")]
 MaxSpeedOpt = Annotated[float, typer.Option(
     "--max-speed", callback=positive,
-    help=f"Largest knob speed between samples, deg/s (default {DEFAULT_MAX_SPEED:g}: one turn a "
-         "second; the paper's motions need at most 40, a geared knob motor does a few hundred, "
-         "while the inverse model's jump across the backlash at a reversal asks for up to ~40 "
-         "deg in one sample, 3942 deg/s at 100 Hz). A robot that announces a lower top speed "
-         "gets its own.")]
+    help="Largest knob speed between samples, deg/s. The default is one knob turn a second: the "
+         "paper's motions need at most 40 and a geared knob motor does a few hundred, while the "
+         "inverse model's jump across the backlash at a reversal asks for up to ~40 deg within "
+         "one sample (3942 deg/s at 100 Hz). A robot that announces a lower top speed gets its "
+         "own.")]
 MaxAccelOpt = Annotated[Optional[float], typer.Option(
     "--max-accel", callback=positive,
     help="Largest knob acceleration, deg/s^2 (default: reported, not limited).")]
@@ -63,8 +63,7 @@ AllowFastOpt = Annotated[bool, typer.Option(
          "limit (the knob arrives late), `compensate` writes them. Travel is never waived.")]
 MoveSpeedOpt = Annotated[float, typer.Option(
     "--speed", callback=positive,
-    help=f"Knob speed of the move, deg/s (default {DEFAULT_MOVE_SPEED:g}: slow enough to watch "
-         "and stop by hand).")]
+    help="Knob speed of the move, deg/s; the default is slow enough to watch and stop by hand.")]
 
 
 def limits(travel_limit: float, max_speed: float, max_accel: float | None = None) -> Limits:
