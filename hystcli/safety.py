@@ -2,9 +2,11 @@
 
 A knob command file (``hyst compensate``'s output, ``hyst sweep``'s, a user's own) can ask a
 motor for what it cannot or must not do: a non-finite angle, an angle past the knob's travel,
-or a step too fast for one sample. The inverse model does the last by design: where the
-desired tip angle reverses, the command jumps across the backlash plateau and the dead zone
-(up to ~40 deg within one sample on the calibrated catheters: 3942 deg/s at 100 Hz). This module
+or a step too fast for one sample. The inverse model does the last by design: where the tip
+must cross a flat part of the loop, the command jumps across it within one sample: across the
+dead zone when the desired tip angle passes the dead-zone height (about 39 deg on the sample
+data's shifted model: 3942 deg/s at 100 Hz), across the backlash plateau where it reverses
+(about 10 deg on the calibrated catheters). This module
 measures what a trajectory asks for (range, peak speed and acceleration per knob, with where
 they occur) and compares it with :class:`Limits`, so that ``compensate`` can say it and refuse
 it, and ``play`` (any command that moves a knob) can refuse a file *before its first MOVE*
@@ -32,8 +34,9 @@ DEFAULT_MAX_SPEED = 360.0
 """Default peak knob speed (deg/s): one knob turn per second. The paper's motions need at most
 40 deg/s (the identification sweep; the compensated references about 12 deg/s away from their
 reversals), and a geared knob motor of a catheter handle does a few hundred deg/s. What exceeds
-it is the inverse model's jump across the backlash at a reversal (up to ~40 deg in one sample):
-a motor at this speed crosses such a jump in about 0.1 s instead of one sample."""
+it is the inverse model's jump across the dead zone or the backlash (up to ~40 deg in one
+sample): a motor at this speed crosses such a jump in about 0.1 s instead of one sample, while
+the tip rests on the flat part the jump crosses."""
 
 DEFAULT_MOVE_SPEED = 20.0
 """Speed (deg/s) of the untimed moves: to a trajectory's first command, home, back to the start

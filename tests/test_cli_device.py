@@ -74,7 +74,7 @@ def _play_on_sim_robot(commands: Path, out: Path, *robot_args: str, shape: str =
     """Play ``commands`` with `hyst play` on a fresh `hyst sim-robot --catheter ice-a --shape shape`."""
     proc, path = start_sim_robot("--catheter", "ice-a", "--shape", shape, *robot_args)
     try:
-        # --allow-fast: the compensated commands jump across the backlash at each reversal
+        # --allow-fast: the compensated commands jump across the dead zone and the backlash
         # (beyond the 360 deg/s default limit); they are played at the limit instead
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
                                   "--quiet", "--allow-fast", "--timeout", TIMEOUT])

@@ -97,8 +97,9 @@ def compensate_cmd(
     Keeps t, r and the metadata; sets `controller` (comp or comp+shift) and the offsets used.
     Reports each knob's range, peak speed and peak acceleration, and refuses (writes nothing,
     exit 1) commands beyond --travel-limit, or beyond --max-speed (--max-accel) unless
-    --allow-fast: at a reversal of the reference the inverse model jumps across the backlash
-    and the dead zone within one sample, which a motor cannot follow at the file's timing.
+    --allow-fast: where the tip must cross a flat part of the loop (the dead zone, the
+    backlash at a reversal) the inverse model jumps across it within one sample, which a motor
+    cannot follow at the file's timing.
     """
     from ..safety import LimitExceeded, check_motion, require_within
 

@@ -51,7 +51,7 @@ MaxSpeedOpt = Annotated[float, typer.Option(
     "--max-speed", callback=positive,
     help="Largest knob speed between samples, deg/s. The default is one knob turn a second: the "
          "paper's motions need at most 40 and a geared knob motor does a few hundred, while the "
-         "inverse model's jump across the backlash at a reversal asks for up to ~40 deg within "
+         "inverse model's jump across the dead zone or the backlash asks for up to ~40 deg within "
          "one sample (3942 deg/s at 100 Hz). A robot that announces a lower top speed gets its "
          "own.")]
 MaxAccelOpt = Annotated[Optional[float], typer.Option(
