@@ -259,6 +259,11 @@ def test_bad_timeout_is_a_usage_error(model_path, tmp_path, bad):
     assert not (tmp_path / "x.json").exists()
 
 
+def test_bad_baud_is_a_usage_error(model_path, tmp_path):
+    res = detect(model_path, "/dev/null-no-port", tmp_path / "x.json", "--baud", "-9600")
+    assert res.exit_code == 2 and "--baud" in res.output, res.output
+
+
 def test_one_connection_for_every_knob(model_path, tmp_path):
     """Both knobs are searched over one connection: one handshake (the port used to be opened,
     and the device greeted, once per knob)."""

@@ -45,6 +45,8 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
     knobs = list(model.knobs) if knobs is None else knobs
     for k in knobs:
         model.knob(k)
+    if baud <= 0:  # pyserial's own refusal would come out as a link error (exit 1)
+        raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
     # one connection for every knob: one handshake, and no second open of a port that a
     # device (or an OS) may hold exclusively
     with device.Device(port, baud, timeout) as dev:
