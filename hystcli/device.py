@@ -26,9 +26,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Callable, Mapping
-
-import numpy as np
+from typing import Any, Mapping
 
 from .errors import DeviceError, LinkError, SafetyStop
 from .shift import ProbeSample
@@ -437,7 +435,9 @@ class Device:
         Baud rate when the driver opens the port.
     timeout : float
         Deadline (s) for each reply, counted from the request. A ``MOVE`` is answered once the
-        knob arrived, so it must exceed the longest single step of the motor.
+        knob arrived (and held its dwell): its deadline grows by the dwell and, when the MOVE
+        gives a speed and the knob's angle is known from an earlier reply (:attr:`angles`), by
+        the motion's duration; otherwise the timeout must exceed the longest single step.
     handshake : bool
         Send ``HELLO`` on open and check the protocol version (recommended).
 
@@ -447,6 +447,12 @@ class Device:
         Cannot open the port, or no valid handshake reply.
     DeviceError
         The device answered with an error, or speaks another protocol version.
+
+    Attributes
+    ----------
+    angles : dict of int to float
+        The last angle each knob reported (every ``POS`` reply): where it is as far as the host
+        knows, e.g. after a fault.
 
     Notes
     -----
@@ -475,6 +481,8 @@ class Device:
         self._closed = False
         self.info: DeviceInfo | None = None
         self.stale_replies = 0    # replies dropped because their sequence number was old
+        # the last angle each knob reported (POS replies): where it is as far as the host knows
+        self.angles: dict[int, float] = {}
         self.requests = 0
         if handshake:
             try:
@@ -569,8 +577,13 @@ class Device:
                                   f"<= {MAX_DWELL:g} s, got {value!r}")
             self._require(option)
             args.append(f"{option}={value:.4f}")
-        # the reply comes after the dwell: the deadline counts from the request, so it grows by it
+        # the reply comes on arrival, after the dwell: the deadline counts from the request, so it
+        # grows by the dwell and, when the host knows where the knob was and how fast it goes, by
+        # the motion's own duration (a long move at a slow speed is not a dead link)
         timeout = self.timeout + (dwell or 0.0)
+        last = self.angles.get(int(knob))
+        if speed is not None and last is not None:
+            timeout += abs(angle - last) / float(speed)
         sample = self._pos(self._request("MOVE", *args, expect="POS", timeout=timeout), knob)
         if mean is not None and not sample.averaged:
             raise FrameError(f"MOVE asked device {self._name()} for a mean current (mean=) and its "
@@ -625,6 +638,7 @@ class Device:
         sample = parse_pos(frame.args)
         if sample.knob != int(knob):
             raise FrameError(f"reply is for knob {sample.knob}, request was for knob {knob}")
+        self.angles[sample.knob] = sample.angle
         return sample
 
     def _next_seq(self) -> int:
@@ -855,118 +869,3 @@ def open_probe(port: Any, baud: int = 115200, knob: int = 1, *, timeout: float =
         device.stop()
         device.close()
         raise
-
-
-# --------------------------------------------------------------------------------------------
-# playing a command trajectory
-# --------------------------------------------------------------------------------------------
-def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
-                    min_speed: float = 1e-3, position_speed: float | None = None,
-                    progress: Callable[[int, int], None] | None = None,
-                    clock: Callable[[], float] = time.monotonic,
-                    sleep: Callable[[float], None] = time.sleep) -> Any:
-    """Play the knob commands ``q<k>`` of a run on the device and record what it reports.
-
-    The knobs are first brought to the first command (not timed), then every sample ``i`` is
-    sent at ``t[i] - t[0]`` after the start (``paced``) or as soon as the previous one is
-    answered. Each MOVE carries the speed that covers the step in the sample interval, so the
-    motor moves as the trajectory says.
-
-    Parameters
-    ----------
-    device : Device
-        An open device (handshake done).
-    trajectory : hystcli.io.Run
-        Columns ``t`` and ``q1`` and/or ``q2`` (e.g. the output of ``hyst compensate``); its
-        ``r<k>`` columns and metadata are carried over.
-    paced : bool
-        Follow the file's timing (True) or go as fast as the device answers.
-    min_speed : float
-        Lowest knob speed sent (deg/s), for steps that hardly move.
-    position_speed : float, optional
-        Speed of the untimed move to the first command (the device's default when None).
-    progress : callable, optional
-        Called as ``progress(i, n)`` after each sample.
-
-    Returns
-    -------
-    hystcli.io.Run
-        Columns ``t`` (the file's), ``q<k>`` (commands), ``c<k>`` (mA), ``y<k>`` (deg, when the
-        device has a tracker), ``r<k>`` when the trajectory has them; the trajectory's metadata
-        plus the device identity and ``play_timing``, ``play_max_lag_s``.
-
-    Raises
-    ------
-    DataError
-        The trajectory has no knob command, a non-finite command, or a knob the device lacks.
-    LinkError, DeviceError
-        From the device. On any error or interruption every motor is stopped first.
-    """
-    from .errors import DataError
-    from .io import Run
-
-    info = device.info or device.hello()
-    run = trajectory
-    knobs = run.knobs("q")
-    if not knobs:
-        raise DataError(f"{run.source or 'trajectory'}: no knob command column (q1 or q2)")
-    missing = [k for k in knobs if k not in info.knobs]
-    if missing:
-        raise DataError(f"{run.source or 'trajectory'} commands knob {missing[0]} but device "
-                        f"{info.name} drives knobs {','.join(map(str, info.knobs))}")
-    t = np.asarray(run.t, float)
-    if len(t) < 2 or not np.all(np.isfinite(t)) or np.any(np.diff(t) <= 0):
-        raise DataError(f"{run.source or 'trajectory'}: t must be finite, strictly increasing, "
-                        "with at least 2 samples")
-    qs = {k: np.asarray(run[f"q{k}"], float) for k in knobs}
-    for k, q in qs.items():
-        if not np.all(np.isfinite(q)):
-            raise DataError(f"{run.source or 'trajectory'}: column q{k} has a non-finite command "
-                            f"at row {int(np.argmin(np.isfinite(q)))}")
-    n = len(t)
-    c = {k: np.empty(n) for k in knobs}
-    y = {k: np.empty(n) for k in knobs} if info.tracker else {}
-    max_lag = 0.0
-    try:
-        for k in knobs:
-            device.move(k, qs[k][0], position_speed)
-        start = clock()
-        prev = {k: qs[k][0] for k in knobs}
-        for i in range(n):
-            dt = t[i] - t[i - 1] if i else t[1] - t[0]
-            if paced:
-                due = start + (t[i] - t[0])
-                lag = clock() - due
-                if lag < 0:
-                    sleep(-lag)
-                else:
-                    max_lag = max(max_lag, lag)
-            for k in knobs:
-                q = qs[k][i]
-                speed = max(abs(q - prev[k]) / dt, min_speed)
-                s = device.move(k, q, speed)
-                prev[k] = q
-                c[k][i] = s.current
-                if info.tracker:
-                    if s.tip is None:
-                        raise LinkError(f"device {info.name} announced a tracker but sent no "
-                                        f"tip angle at sample {i}")
-                    y[k][i] = s.tip
-            if progress is not None:
-                progress(i + 1, n)
-    except BaseException:
-        device.stop()
-        raise
-    cols: dict[str, np.ndarray] = {"t": t}
-    for k in knobs:
-        if f"r{k}" in run:
-            cols[f"r{k}"] = np.asarray(run[f"r{k}"], float)
-        cols[f"q{k}"] = qs[k]
-        if info.tracker:
-            cols[f"y{k}"] = y[k]
-        cols[f"c{k}"] = c[k]
-    meta = dict(run.meta)
-    meta.update(info.as_meta())
-    meta["play_timing"] = "paced" if paced else "fast"
-    meta["play_max_lag_s"] = f"{max_lag:.4f}"
-    return Run(cols, meta)

@@ -94,6 +94,30 @@ class Fault:
         return cls(m.group(1), int(m.group(2)), int(m.group(3) or 1), m.group(4))
 
 
+def _scratch_copy(obj: Any) -> Any:
+    """A deep copy of ``obj`` that shares its immutable parts (frozen dataclasses: a catheter, its
+    effects, a shape), which may hold read-only mapping views that ``copy.deepcopy`` cannot copy.
+    The copy's mutable state (clock, filter and noise states) is its own."""
+    import copy
+    import dataclasses
+
+    memo: dict[int, Any] = {}
+
+    def share(x: Any) -> None:
+        if dataclasses.is_dataclass(x) and not isinstance(x, type) and x.__dataclass_params__.frozen:
+            memo[id(x)] = x
+        elif isinstance(x, dict):
+            for v in x.values():
+                share(v)
+        elif isinstance(x, (list, tuple)):
+            for v in x:
+                share(v)
+
+    for value in vars(obj).values():
+        share(value)
+    return copy.deepcopy(obj, memo)
+
+
 class _Closed(Exception):
     """Raised inside the emulator when a ``close`` fault fires."""
 
@@ -117,17 +141,35 @@ class DeviceEmulator:
         Optional protocol features to announce and serve (default: all of
         ``hystcli.device.FEATURES``: ``dwell`` and ``mean``); ``()`` makes a device of the base
         protocol, which refuses MOVE options with ``E_ARG``.
+    max_speed : float
+        Fastest knob speed (deg/s) its motors do; a faster MOVE is refused (``E_ARG``).
+    max_move_time : float
+        Longest single motion (s) it accepts: a MOVE whose distance / speed exceeds it is refused
+        (``E_ARG``). The twin computes a move's samples at once (one per millisecond), so
+        without this bound a slow speed over a long way (170 deg at 0.001 deg/s: 1.7e8 samples)
+        would exhaust the memory of the process serving the port.
+
+    The handshake announces ``travel=`` and ``max_speed=`` (docs/protocol.md, "Device limits"),
+    so that a host checks a whole trajectory against them before its first MOVE.
 
     Attributes
     ----------
-    moves, stops, bad_frames, errors_sent : int
-        Counters a test can read: MOVE frames received, STOPs executed, frames refused as
-        corrupt or malformed, ERR replies sent.
+    moves, hellos, stops, bad_frames, errors_sent : int
+        Counters a test can read: MOVE frames received, handshakes answered (one per host
+        connection), STOPs executed, frames refused as corrupt or malformed, ERR replies sent.
     """
 
     def __init__(self, twin: Any, *, name: str = "hyst-sim", travel_limit: float = 170.0,
                  default_speed: float = 20.0, faults: Iterable[Fault] = (),
-                 features: Sequence[str] = FEATURES) -> None:
+                 features: Sequence[str] = FEATURES, max_speed: float = 1000.0,
+                 max_move_time: float = 120.0) -> None:
+        for what, value in (("travel limit", travel_limit), ("default speed", default_speed),
+                            ("max speed", max_speed), ("max move time", max_move_time)):
+            if not (math.isfinite(value) and value > 0):
+                raise DataError(f"emulator {what} must be a positive number, got {value!r}")
+        if default_speed > max_speed:
+            raise DataError(f"emulator default speed {default_speed:g} deg/s is beyond its max "
+                            f"speed {max_speed:g} deg/s")
         self.twin = twin
         catheter = getattr(twin, "catheter", None)
         knobs = tuple(int(k) for k in getattr(twin, "knobs", (1, 2)))
@@ -136,17 +178,51 @@ class DeviceEmulator:
             raise DataError(f"unknown protocol feature {unknown[0]!r} (known: {', '.join(FEATURES)})")
         self.info = DeviceInfo(PROTOCOL_VERSION, name,
                                str(getattr(catheter, "name", catheter or "unknown")), knobs,
-                               bool(getattr(twin, "tip_available", True)), {"fw": "hystcli-emulator"},
+                               bool(getattr(twin, "tip_available", True)),
+                               {"fw": "hystcli-emulator", "travel": f"{travel_limit:g}",
+                                "max_speed": f"{max_speed:g}"},
                                tuple(f for f in FEATURES if f in features))
         self.travel_limit = float(travel_limit)
         self.default_speed = float(default_speed)
+        self.max_speed = float(max_speed)
+        self.max_move_time = float(max_move_time)
         self.faults: list[Fault] = list(faults)
         self.moves = 0
+        self.hellos = 0
         self.stops = 0
         self.bad_frames = 0
         self.errors_sent = 0
         self.silent = False
         self._lock = threading.Lock()
+        self._angles: dict[int, float] = {}
+        self.warm_up()
+
+    def warm_up(self) -> bool:
+        """Make a few moves on a copy of the twin, so that the first MOVE a host sends is
+        answered as fast as the others; learn where the knobs start. Returns False when the
+        twin cannot be copied (it is then served cold).
+
+        Why: the twin's sequential stages are numba-compiled functions, cached on disk but loaded
+        (or, with no cache, compiled) on their first call, which took 0.2-0.9 s idle and several
+        seconds on a busy machine: a fresh `hyst sim-robot` then missed a host's 1 s deadline on
+        its first MOVE. A copy keeps the served twin's clock and noise streams untouched, so the
+        device still answers exactly what a twin of the same seed computes.
+        """
+        try:
+            scratch = _scratch_copy(self.twin)
+        except Exception:  # noqa: BLE001 - a twin that cannot be copied: served cold
+            return False
+        with self._lock:
+            try:
+                angles = {k: float(scratch.state(k)[0]) for k in self.info.knobs}
+                k = self.info.knobs[0]
+                # both directions, a dwell and the averaging window: every path a MOVE takes
+                self._run_move(k, angles[k] + 0.5, self.default_speed, 0.01, 0.01, twin=scratch)
+                self._run_move(k, angles[k], self.default_speed, 0.0, None, twin=scratch)
+            except Exception:  # noqa: BLE001 - a twin that fails here fails its MOVEs: E_MOTOR then
+                return False
+            self._angles.update(angles)
+        return True
 
     SAMPLE_DT = 0.001
     """The twin's sample interval (s): ``LiveTwin.move``'s default, the controller's loop period.
@@ -193,6 +269,7 @@ class DeviceEmulator:
             return self._move(frame)
         try:
             if frame.verb == "HELLO":
+                self.hellos += 1
                 return [(encode_frame(frame.seq, "HELLO", *self.info.to_fields()), 0.0)]
             if frame.verb == "STOP":
                 self.stops += 1
@@ -240,8 +317,20 @@ class DeviceEmulator:
                                f"{angle:g} deg outside +-{self.travel_limit:g}"), 0.0)]
         if not speed > 0:
             return [(self._err(frame.seq, "E_ARG", "speed must be positive"), 0.0)]
+        if speed > self.max_speed:
+            return [(self._err(frame.seq, "E_ARG", f"speed {speed:g} deg/s beyond the motor's "
+                                                    f"{self.max_speed:g}"), 0.0)]
+        # where the knob is, as this controller knows it (reading the twin would draw tracker
+        # noise); unknown: anywhere within the travel
+        here = self._angles.get(knob)
+        distance = abs(angle - here) if here is not None else abs(angle) + self.travel_limit
+        duration = distance / speed
+        if duration > self.max_move_time:
+            return [(self._err(frame.seq, "E_ARG", f"move of {duration:.4g} s beyond the "
+                                                    f"{self.max_move_time:g} s limit"), 0.0)]
         q, c, y, mean = self._run_move(knob, angle, speed, options.get("dwell", 0.0),
                                        options.get("mean"))
+        self._angles[knob] = float(q)
         if "spike" in kinds:
             bump = float(kinds["spike"].value or 5000.0)
             c = float(c) + bump
@@ -270,15 +359,15 @@ class DeviceEmulator:
             out[key] = v
         return out
 
-    def _run_move(self, knob: int, angle: float, speed: float, dwell: float,
-                  mean: float | None) -> tuple[float, float, float, tuple[float, float, float] | None]:
+    def _run_move(self, knob: int, angle: float, speed: float, dwell: float, mean: float | None,
+                  twin: Any = None) -> tuple[float, float, float, tuple[float, float, float] | None]:
         """Move the twin, hold it ``dwell`` s and, when asked, average the last ``mean`` s.
 
         Returns ``(q, c, tip, (q_mean, c_mean, t_mean) or None)``. The twin advances in whole
         samples of :attr:`SAMPLE_DT`; the window is the last ``mean`` s of the move's and the
         hold's samples (:meth:`LiveTwin.last_samples`), clipped to them.
         """
-        twin, dt = self.twin, self.SAMPLE_DT
+        twin, dt = self.twin if twin is None else twin, self.SAMPLE_DT
         n_dwell = int(round(dwell / dt)) if dwell > 0 else 0
         q, c, y = twin.move(knob, angle, speed_deg_s=speed, dt=dt)
         parts = [twin.last_samples(knob)]
@@ -337,13 +426,25 @@ class PtyServer:
     ----------
     path : str
         The slave device path (``/dev/pts/N``) a client opens as a serial port.
+    closed : bool
+        Whether the pseudo-terminal has been closed (:meth:`close_pty`, a ``close`` fault,
+        :meth:`shutdown`).
+
+    Notes
+    -----
+    Only one thread ever closes the file descriptors: the one serving (:meth:`serve_forever`)
+    while it serves, else the caller. Another thread that wants the pty closed asks the serving
+    loop (through the wake pipe) and waits. Closing a descriptor under a thread blocked on it in
+    ``select`` or about to ``write`` to it is a race: the number can be reused at once by any
+    ``open`` in the process (a test's temporary file, a client's port), and the serving thread
+    would then read from or write replies into that file. A lock makes each close happen once.
     """
 
     def __init__(self, emulator: DeviceEmulator, latency: float = 0.0) -> None:
         import tty
 
-        if not latency >= 0:
-            raise DataError("latency must be >= 0")
+        if not (latency >= 0 and math.isfinite(latency)):
+            raise DataError("latency must be a finite number >= 0")
         self.emulator = emulator
         self.latency = float(latency)
         self._master, self._slave = os.openpty()
@@ -353,8 +454,13 @@ class PtyServer:
         os.set_blocking(self._master, False)
         self.path = os.ttyname(self._slave)
         self._wake_r, self._wake_w = os.pipe()
+        os.set_blocking(self._wake_r, False)
+        self._lock = threading.Lock()
         self._thread: threading.Thread | None = None
+        self._serving: threading.Thread | None = None   # the thread inside serve_forever
         self._stopping = threading.Event()
+        self._close_requested = False
+        self._pty_closed = threading.Event()
         self.closed = False
 
     # ---- life cycle ------------------------------------------------------------------------
@@ -371,27 +477,40 @@ class PtyServer:
         self.shutdown()
 
     def shutdown(self) -> None:
-        """Stop serving and close the pseudo-terminal (idempotent)."""
+        """Stop serving and close the pseudo-terminal (idempotent, from any thread)."""
         self._stopping.set()
-        try:
-            os.write(self._wake_w, b"x")
-        except OSError:
-            pass
-        if self._thread is not None and self._thread is not threading.current_thread():
-            self._thread.join(timeout=5)
-        self._close_fds()
-        for fd in (self._wake_r, self._wake_w):
-            try:
-                os.close(fd)
-            except OSError:
-                pass
-        self._wake_r = self._wake_w = -1
+        with self._lock:
+            self._wake_locked()
+        thread = self._thread
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=10)
+        with self._lock:
+            if self._serving is None or self._serving is threading.current_thread():
+                self._close_pty_locked()
+                self._close_wake_locked()
+            # else the serving loop is still busy (a long reply delay): it sees _stopping and
+            # closes everything itself on its way out
 
     def close_pty(self) -> None:
         """Close the pseudo-terminal now: the client sees a disconnected device."""
-        self._close_fds()
+        with self._lock:
+            if self.closed:
+                return
+            if self._serving is None or self._serving is threading.current_thread():
+                self._close_pty_locked()
+                return
+            self._close_requested = True
+            self._wake_locked()
+        self._pty_closed.wait(timeout=10)
 
-    def _close_fds(self) -> None:
+    def _wake_locked(self) -> None:
+        if self._wake_w >= 0:
+            try:
+                os.write(self._wake_w, b"x")
+            except OSError:
+                pass  # the pipe is full: the loop is woken already
+
+    def _close_pty_locked(self) -> None:
         if self.closed:
             return
         self.closed = True
@@ -400,23 +519,54 @@ class PtyServer:
                 os.close(fd)
             except OSError:
                 pass
+        self._master = self._slave = -1
+        self._pty_closed.set()
+
+    def _close_wake_locked(self) -> None:
+        for fd in (self._wake_r, self._wake_w):
+            if fd >= 0:
+                try:
+                    os.close(fd)
+                except OSError:
+                    pass
+        self._wake_r = self._wake_w = -1
 
     # ---- the loop --------------------------------------------------------------------------
     def serve_forever(self) -> None:
-        """Answer frames until :meth:`shutdown` (or a ``close`` fault)."""
+        """Answer frames until :meth:`shutdown`, :meth:`close_pty` or a ``close`` fault."""
+        with self._lock:
+            if self.closed or self._stopping.is_set() or self._serving is not None:
+                return
+            self._serving = threading.current_thread()
+        try:
+            self._loop()
+        finally:
+            with self._lock:
+                self._serving = None
+                if self._close_requested or self._stopping.is_set():
+                    self._close_pty_locked()
+                if self._stopping.is_set():
+                    self._close_wake_locked()
+
+    def _loop(self) -> None:
         buf = bytearray()
         overflow = False
-        while not self._stopping.is_set() and not self.closed:
+        master, wake = self._master, self._wake_r  # only this thread closes them while it serves
+        while not (self._stopping.is_set() or self._close_requested or self.closed):
             try:
-                ready, _, _ = select.select([self._master, self._wake_r], [], [], 0.5)
+                ready, _, _ = select.select([master, wake], [], [], 0.5)
             except (OSError, ValueError):
                 break
-            if self._wake_r in ready or self.closed:
-                break
+            if wake in ready:
+                try:
+                    os.read(wake, 512)
+                except OSError:
+                    pass
+                continue  # the loop condition says why it was woken
             if not ready:
                 continue
             try:
-                data = os.read(self._master, 4096)
+                data = os.read(master, 4096)
             except BlockingIOError:
                 continue
             except OSError:
@@ -440,16 +590,17 @@ class PtyServer:
                 try:
                     replies = self.emulator.handle_line(line)
                 except _Closed:
-                    self._close_fds()
+                    self.close_pty()
                     return
                 for reply, delay in replies:
                     if self.latency + delay > 0:
                         time.sleep(self.latency + delay)
-                    self._send(reply)
+                    self._send(master, reply)
 
-    def _send(self, data: bytes) -> None:
+    @staticmethod
+    def _send(master: int, data: bytes) -> None:
         try:
-            os.write(self._master, data)
+            os.write(master, data)
         except BlockingIOError:
             pass  # the client does not read: a real device would drop the reply too
         except OSError as exc:
@@ -458,7 +609,8 @@ class PtyServer:
 
 
 def serve(twin: Any, *, latency: float = 0.0, faults: Iterable[Fault] = (),
-          name: str = "hyst-sim", travel_limit: float = 170.0, background: bool = True) -> PtyServer:
+          name: str = "hyst-sim", travel_limit: float = 170.0, max_speed: float = 1000.0,
+          background: bool = True) -> PtyServer:
     """Serve ``twin`` as a robot on a new pseudo-terminal.
 
     Parameters
@@ -472,14 +624,19 @@ def serve(twin: Any, *, latency: float = 0.0, faults: Iterable[Fault] = (),
         Device name in the handshake.
     travel_limit : float
         Largest absolute knob angle accepted (deg).
+    max_speed : float
+        Fastest knob speed accepted (deg/s).
     background : bool
         Start a daemon thread (True) or return the server for :meth:`PtyServer.serve_forever`.
 
     Returns
     -------
     PtyServer
-        ``server.path`` is the device to connect to; ``server.shutdown()`` ends it.
+        ``server.path`` is the device to connect to; ``server.shutdown()`` ends it. The twin
+        has been warmed up (:meth:`DeviceEmulator.warm_up`): the device answers its first MOVE
+        as fast as the others as soon as the path exists.
     """
-    emu = DeviceEmulator(twin, name=name, travel_limit=travel_limit, faults=faults)
+    emu = DeviceEmulator(twin, name=name, travel_limit=travel_limit, faults=faults,
+                         max_speed=max_speed)
     server = PtyServer(emu, latency)
     return server.start() if background else server

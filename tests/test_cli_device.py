@@ -1,13 +1,16 @@
-"""`hyst sim-robot` and `hyst play` end to end over a real pseudo-terminal.
+"""`hyst sim-robot`, `play`, `status`, `home` and `jog` end to end over a real pseudo-terminal.
 
-The robot is `hyst sim-robot` in a subprocess (the most honest setup) or the same emulator in a
-thread when a test needs to look inside it (its stop counter); the host side is the CLI through
-typer's CliRunner. Nothing is mocked above the transport.
+The robot is `hyst sim-robot` in a subprocess (the most honest setup: tests/simrobot.py) or the
+same emulator in a thread when a test needs to look inside it (its MOVE and STOP counters); the
+host side is the CLI through typer's CliRunner, or `hyst` in a subprocess when a test sends it
+Ctrl-C. Nothing is mocked above the transport. Every host command that must succeed gets a
+generous reply deadline (simrobot.TIMEOUT); tests that need a deadline to fire pass a short one
+against a fault that cannot answer in time.
 """
 from __future__ import annotations
 
 import json
-import select
+import math
 import signal
 import subprocess
 import sys
@@ -19,39 +22,34 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli import compensation
+from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
-from hystcli.device import Device, play_trajectory
+from hystcli.device import Device
 from hystcli.emulator import Fault, serve
 from hystcli.io import Run, read_run, write_run
 from hystcli.model import Shape
-from hystcli.calibration import calibrated_catheter
+from hystcli.robot import Interrupted, play_trajectory
+from hystcli.safety import LimitExceeded, Limits
 from hystcli.twin import LiveTwin, periodic, simulate
+from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot` and `hyst simulate` serve as ice-a
 SHAPE = "alpha=45,theta=0"
 runner = CliRunner()
 
 
-def _start_sim_robot(*args: str) -> tuple[subprocess.Popen, str]:
-    proc = subprocess.Popen([sys.executable, "-m", "hystcli", "sim-robot", "--quiet", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    ready, _, _ = select.select([proc.stdout], [], [], 60)
-    if not ready:
-        proc.kill()
-        raise AssertionError("sim-robot printed no device path within 60 s")
-    path = proc.stdout.readline().strip()
-    assert path.startswith("/dev/"), (path, proc.stderr.read() if proc.poll() is not None else "")
-    return proc, path
+def _status(path: str) -> dict:
+    """`hyst status --format json` on the robot: what a user reads (nothing moves)."""
+    res = runner.invoke(app, ["status", "--port", path, "--timeout", TIMEOUT, "--format", "json"])
+    assert res.exit_code == 0, res.output
+    return json.loads(res.stdout)
 
 
-def _stop(proc: subprocess.Popen) -> int:
-    if proc.poll() is None:
-        proc.send_signal(signal.SIGTERM)
-    try:
-        return proc.wait(timeout=20)
-    finally:
-        if proc.poll() is None:
-            proc.kill()
+def _error_line(res) -> str:
+    """The one `Error:` line of a failed command (and that there is exactly one, no traceback)."""
+    lines = [ln for ln in res.output.splitlines() if ln.startswith("Error:")]
+    assert len(lines) == 1 and "Traceback" not in res.output, res.output
+    return lines[0]
 
 
 @pytest.fixture(scope="module")
@@ -74,13 +72,15 @@ def commands(tmp_path_factory) -> Path:
 # ------------------------------------------------------------------------------------------
 def _play_on_sim_robot(commands: Path, out: Path, *robot_args: str, shape: str = SHAPE) -> Path:
     """Play ``commands`` with `hyst play` on a fresh `hyst sim-robot --catheter ice-a --shape shape`."""
-    proc, path = _start_sim_robot("--catheter", "ice-a", "--shape", shape, *robot_args)
+    proc, path = start_sim_robot("--catheter", "ice-a", "--shape", shape, *robot_args)
     try:
+        # --allow-fast: the compensated commands jump across the dead zone and the backlash
+        # (beyond the 360 deg/s default limit); they are played at the limit instead
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
-                                  "--quiet"])
+                                  "--quiet", "--allow-fast", "--timeout", TIMEOUT])
         assert res.exit_code == 0, res.output
     finally:
-        assert _stop(proc) == 0  # SIGTERM ends it cleanly
+        assert stop(proc) == 0  # SIGTERM ends it cleanly
     return out
 
 
@@ -136,93 +136,232 @@ def test_sim_robot_serves_the_catheter_hyst_simulate_runs(commands, tmp_path):
     assert rms["none"] > 10 * rms["default"], rms
 
 
-def test_sim_robot_refuses_an_unknown_catheter():
-    res = runner.invoke(app, ["sim-robot", "--catheter", "ice-z"])
-    assert res.exit_code == 1 and "unknown virtual catheter 'ice-z'" in res.output
-
-
+# ------------------------------------------------------------------------------------------
+# a fault or Ctrl-C while playing: motors stopped, knobs back (or held), the error says where
+# ------------------------------------------------------------------------------------------
 def test_play_fault_from_sim_robot_subprocess_writes_nothing(commands, tmp_path):
-    proc, path = _start_sim_robot("--fault", "close@20")
+    """An unplugged cable (the robot closes its port at the 20th MOVE): exit 1, one error line
+    that says the knob could NOT be returned and where it was last reported, nothing written."""
+    proc, path = start_sim_robot("--fault", "close@20")
     try:
         out = tmp_path / "run.csv"
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
-                                  "--timeout", "0.5"])
+                                  "--allow-fast", "--timeout", TIMEOUT])
     finally:
         try:
             code = proc.wait(timeout=20)  # its port closed, the robot process ends by itself
         finally:
-            _stop(proc)
+            stop(proc)
     assert res.exit_code == 1
-    assert "Error:" in res.output and ("disconnected" in res.output or "no reply" in res.output)
-    assert "Traceback" not in res.output
+    line = _error_line(res)
+    assert "disconnected" in line or "no reply" in line
+    assert "knob 1 could NOT be returned to +0.00 deg" in line and "last reported at" in line
     assert not out.exists() and list(tmp_path.iterdir()) == []
     assert code == 0
 
 
-def test_sim_robot_refuses_a_bad_fault_spec():
-    res = runner.invoke(app, ["sim-robot", "--fault", "boom@1"])
-    assert res.exit_code == 1 and "unknown fault 'boom'" in res.output
-
-
-# ------------------------------------------------------------------------------------------
-# play faults against an emulator in a thread (to see its stop counter)
-# ------------------------------------------------------------------------------------------
 @pytest.fixture
 def robot():
+    """The emulator in a thread behind a real pty (to see its counters)."""
     srv = serve(LiveTwin(CAT, seed=1))
     yield srv
     srv.shutdown()
 
 
-@pytest.mark.parametrize("fault, words", [
-    (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR"),
-    (Fault("garble", at=10), "checksum mismatch"),
-    (Fault("silent", at=10), "no reply"),
+@pytest.mark.parametrize("fault, words, back", [
+    (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR", True),
+    (Fault("garble", at=10), "checksum mismatch", True),
+    (Fault("silent", at=10), "no reply", False),
 ])
-def test_play_faults_stop_the_motors_and_write_nothing(robot, commands, tmp_path, fault, words):
+def test_play_faults_stop_return_and_write_nothing(robot, commands, tmp_path, fault, words, back):
     robot.emulator.inject(fault)
     out = tmp_path / "run.csv"
+    # a deadline that must fire on the silent robot (twice: the MOVE, the return): 2 s, far above
+    # a warmed robot's answer (about 1 ms) on a loaded machine
     res = runner.invoke(app, ["play", str(commands), "--port", robot.path, "-o", str(out), "--fast",
-                              "--timeout", "0.3"])
+                              "--allow-fast", "--timeout", "2"])
     assert res.exit_code == 1
-    last = res.output.strip().splitlines()[-1]
-    assert last.startswith("Error:") and words in last
+    line = _error_line(res)
+    assert words in line and "motors stopped" in line
     assert not out.exists()
-    if fault.kind != "silent":
-        assert robot.emulator.stops >= 1  # the host stopped the motors
+    if back:
+        assert robot.emulator.stops >= 1  # the host stopped the motors, then brought the knob back
+        assert "knob 1 returned to +0.00 deg" in line
+        assert _status(robot.path)["knobs"]["1"]["angle"] == 0.0
+    else:
+        assert "knob 1 could NOT be returned to +0.00 deg" in line and "last reported at" in line
 
 
-def test_play_interrupted_stops_the_motors(robot, commands):
+def test_play_interrupted_returns_the_knob(robot, commands):
+    """Ctrl-C (KeyboardInterrupt from the progress callback, where a real one lands) after 5
+    samples: the motors are stopped, the knob goes back to where the play began (it was moved to
+    3 deg first), and the interrupt says so."""
     def interrupt(i, n):
         if i == 5:
             raise KeyboardInterrupt
 
-    with Device(robot.path, timeout=0.5) as dev:
-        with pytest.raises(KeyboardInterrupt):
-            play_trajectory(dev, read_run(commands), paced=False, progress=interrupt)
+    with Device(robot.path, timeout=float(TIMEOUT)) as dev:
+        dev.move(1, 3.0, 20.0)
+        with pytest.raises(Interrupted, match=r"motors stopped, knob 1 returned to \+3.00 deg"):
+            play_trajectory(dev, read_run(commands), paced=False, progress=interrupt,
+                            allow_fast=True)
         assert robot.emulator.stops == 1
+        assert dev.state(1).angle == pytest.approx(3.0, abs=1e-4)
 
 
-def test_play_paced_follows_the_file_timing(robot):
-    t = np.arange(11) * 0.03  # 0.3 s
-    traj = Run({"t": t, "q1": np.linspace(0, 3, 11)})
-    with Device(robot.path, timeout=0.5) as dev:
-        t0 = time.monotonic()
-        run = play_trajectory(dev, traj, paced=True)
-        elapsed = time.monotonic() - t0
-    assert 0.3 <= elapsed < 2.0  # never ahead of the file; slack for a loaded machine
-    assert run.meta["play_timing"] == "paced" and float(run.meta["play_max_lag_s"]) < 0.5
+def test_play_interrupted_without_return_holds_and_says_where(robot, commands):
+    cmds = read_run(commands)
+
+    def interrupt(i, n):
+        if i == 8:
+            raise KeyboardInterrupt
+
+    with Device(robot.path, timeout=float(TIMEOUT)) as dev:
+        with pytest.raises(Interrupted) as exc:
+            play_trajectory(dev, cmds, paced=False, progress=interrupt, allow_fast=True,
+                            return_on_abort=False)
+        where = cmds["q1"][7]  # the 8th sample, the last one played
+        assert f"knob 1 last reported at {where:+.2f} deg" in str(exc.value)
+        assert "held" in str(exc.value)
+        assert dev.state(1).angle == pytest.approx(where, abs=1e-3)
+
+
+def test_ctrl_c_on_hyst_play_returns_the_knob(tmp_path):
+    """The user's Ctrl-C: `hyst play` in a subprocess, paced through a 12.6 s sweep on `hyst
+    sim-robot`, gets SIGINT once it has checked the file and started: exit 130, one line that
+    says the knob went back, no output file, and `hyst status` reads the knob at 0 deg."""
+    sweep = tmp_path / "sweep.csv"
+    assert runner.invoke(app, ["sweep", "-o", str(sweep), "--quiet"]).exit_code == 0
+    out = tmp_path / "run.csv"
+    with sim_robot() as path:
+        # SIGINT's default action, as a terminal gives it: a test run started in the background
+        # of a non-interactive shell ignores SIGINT, and a child would inherit that
+        proc = subprocess.Popen([sys.executable, "-m", "hystcli", "play", str(sweep), "--port", path,
+                                 "-o", str(out), "--timeout", TIMEOUT],
+                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        try:
+            # readiness: the line it prints after checking the whole file, before the first MOVE
+            line = proc.stderr.readline()
+            while line and not line.startswith("checked:"):
+                line = proc.stderr.readline()
+            assert line.startswith("checked:"), proc.stderr.read()
+            time.sleep(1.0)  # a second into the sweep: the knob is well away from 0
+            proc.send_signal(signal.SIGINT)
+            _, err = proc.communicate(timeout=60)
+        finally:
+            if proc.poll() is None:
+                proc.kill()
+                proc.wait()
+        assert proc.returncode == 130, err
+        errors = [ln for ln in err.splitlines() if ln.startswith("Error:")]
+        assert len(errors) == 1 and "Traceback" not in err, err
+        assert errors[0].startswith("Error: interrupted; motors stopped, knob 1 returned to +0.00 deg")
+        assert not out.exists()
+        assert _status(path)["knobs"]["1"]["angle"] == 0.0
+
+
+# ------------------------------------------------------------------------------------------
+# play checks the whole file before its first MOVE
+# ------------------------------------------------------------------------------------------
+def _ramp(n: int = 50, fs: float = 50.0, top: float = 10.0) -> dict:
+    t = np.arange(n) / fs
+    return {"t": t, "q1": np.linspace(0.0, top, n)}
+
+
+@pytest.mark.parametrize("case, words", [
+    ("nan", "column 'q1', line 42: NaN"),   # row 40 is the file's line 42 (after the header)
+    ("inf", "column 'q1', line 42: an infinite value"),
+    ("t", "column 't' is not strictly increasing at line 32"),
+    ("travel", "knob 1 reaches 175.0 deg at t=0.8 s, beyond the travel limit +-170 deg"),
+    ("huge", "knob 1 reaches 1e+308 deg at t=0.8 s, beyond the travel limit +-170 deg"),
+    ("speed", "knob 1 moves at 2010.2 deg/s at t=0.8 s, beyond the speed limit 360 deg/s"),
+])
+def test_play_checks_the_whole_file_before_the_first_move(robot, tmp_path, case, words):
+    """A bad row late in the file (row 40 of 50) refuses the whole play: nothing moves (the
+    robot counted no MOVE), nothing is written, one error line naming the row or the limit
+    (it used to move until the bad row: the robot refused the MOVE there, E_RANGE).
+    The travel limit is the robot's own (it announces +-170 deg, tighter than --travel-limit's
+    180); the speed step is a 40 deg jump within one 20 ms sample."""
+    cols = _ramp()
+    q = cols["q1"].copy()
+    t = cols["t"].copy()
+    if case in ("nan", "inf", "huge"):
+        q[40] = {"nan": math.nan, "inf": math.inf, "huge": 1e308}[case]
+    elif case == "travel":
+        q[40] = 175.0
+    elif case == "speed":
+        q[41:] += 40.0
+    else:
+        t[30] = t[29]
+    path = tmp_path / "cmds.csv"
+    # the file is written by hand: write_run would refuse some of these itself
+    path.write_text("t,q1\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, q)))
+    out = tmp_path / "run.csv"
+    res = runner.invoke(app, ["play", str(path), "--port", robot.path, "-o", str(out), "--fast",
+                              "--timeout", TIMEOUT])
+    assert res.exit_code == 1
+    assert words in _error_line(res)
+    assert robot.emulator.moves == 0 and not out.exists()
+
+
+def test_allow_fast_plays_jumps_at_the_speed_limit(commands, tmp_path):
+    """The robot's motors do 400 deg/s (it refuses faster MOVEs); the compensated commands
+    jump at up to ~1500 deg/s. Without --allow-fast play refuses the file before moving; with
+    it every step goes at most at the 360 deg/s limit, which the robot accepts, and the run
+    says how many steps were capped. A --max-speed above the robot's is tightened to it."""
+    peak = np.max(np.abs(np.diff(read_run(commands)["q1"]) / np.diff(read_run(commands).t)))
+    assert peak > 400
+    out = tmp_path / "run.csv"
+    with sim_robot("--max-speed", "400") as path:
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
+                                  "--timeout", TIMEOUT])
+        assert res.exit_code == 1 and "beyond the speed limit 360 deg/s" in _error_line(res)
+        assert "--allow-fast" in _error_line(res) and not out.exists()
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
+                                  "--timeout", TIMEOUT, "--max-speed", "1000"])
+        assert "beyond the speed limit 400 deg/s" in _error_line(res)  # the robot's own
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
+                                  "--timeout", TIMEOUT, "--allow-fast"])
+        assert res.exit_code == 0, res.output
+    run = read_run(out)
+    assert run.meta["play_speed_limit"] == "360" and int(run.meta["play_speed_capped"]) > 0
+    assert float(run.meta["play_peak_speed"]) == pytest.approx(peak, rel=1e-3)
+    np.testing.assert_allclose(run["q1"], read_run(commands)["q1"])
 
 
 def test_play_refuses_a_knob_the_device_lacks(commands, tmp_path):
     srv = serve(LiveTwin(CAT, knobs=(2,)))
     try:
         out = tmp_path / "run.csv"
-        res = runner.invoke(app, ["play", str(commands), "--port", srv.path, "-o", str(out)])
+        res = runner.invoke(app, ["play", str(commands), "--port", srv.path, "-o", str(out),
+                                  "--timeout", TIMEOUT])
         assert res.exit_code == 1 and "knob 1" in res.output and "drives knobs 2" in res.output
         assert srv.emulator.moves == 0 and not out.exists()
     finally:
         srv.shutdown()
+
+
+def test_play_paced_follows_the_file_timing(robot):
+    t = np.arange(11) * 0.03  # 0.3 s
+    traj = Run({"t": t, "q1": np.linspace(0, 3, 11)})
+    with Device(robot.path, timeout=float(TIMEOUT)) as dev:
+        t0 = time.monotonic()
+        run = play_trajectory(dev, traj, paced=True)
+        elapsed = time.monotonic() - t0
+    assert elapsed >= 0.3  # never ahead of the file (no upper bound: a loaded machine lags)
+    assert run.meta["play_timing"] == "paced" and float(run.meta["play_max_lag_s"]) >= 0.0
+
+
+def test_play_core_refuses_before_moving(robot):
+    """The core function checks too (any caller, not only the CLI)."""
+    traj = Run({"t": [0.0, 0.01, 0.02], "q1": [0.0, 0.0, 30.0]})
+    with Device(robot.path, timeout=float(TIMEOUT)) as dev:
+        with pytest.raises(LimitExceeded, match="3000.0 deg/s"):
+            play_trajectory(dev, traj, paced=False)
+        with pytest.raises(LimitExceeded, match="beyond the travel limit"):
+            play_trajectory(dev, traj, paced=False, limits=Limits(travel=20.0), allow_fast=True)
+    assert robot.emulator.moves == 0
 
 
 def test_play_refuses_to_overwrite_its_input_before_connecting(commands):
@@ -240,8 +379,119 @@ def test_play_bad_port_is_one_error_line(commands, tmp_path):
     assert "cannot open port /nonexistent/tty" in res.output
 
 
+# ------------------------------------------------------------------------------------------
+# status, home, jog against `hyst sim-robot`
+# ------------------------------------------------------------------------------------------
+def test_status_home_jog_on_sim_robot():
+    with sim_robot("--shape", SHAPE, "--seed", "3") as path:
+        st = _status(path)
+        assert st["device"]["name"] == "hyst-sim" and st["device"]["catheter"] == "ice-a"
+        assert st["device"]["knobs"] == [1, 2] and st["device"]["features"] == ["dwell", "mean"]
+        assert st["limits"] == {"travel": 170.0, "max_speed": 1000.0}
+        # at rest at 0 deg inside the dead zone: the no-load current (ice-a: 120 mA) and noise
+        for k in ("1", "2"):
+            assert st["knobs"][k]["angle"] == 0.0
+            assert abs(st["knobs"][k]["current"] - 120.0) < 5.0
+        table = runner.invoke(app, ["status", "--port", path, "--timeout", TIMEOUT])
+        assert table.exit_code == 0 and "limits: travel +-170 deg, max speed 1000 deg/s" in table.stdout
+
+        res = runner.invoke(app, ["jog", "--port", path, "--knob", "1", "--by", "-2.5",
+                                  "--timeout", TIMEOUT])
+        assert res.exit_code == 0, res.output
+        assert "knob 1: +0.000 -> -2.500 deg" in res.stdout
+        res = runner.invoke(app, ["jog", "--port", path, "--knob", "1", "--by", "7", "--format",
+                                  "json", "--timeout", TIMEOUT])
+        assert json.loads(res.stdout)["knobs"]["1"]["to"] == pytest.approx(4.5)
+        res = runner.invoke(app, ["home", "--port", path, "--knob", "2", "--angle", "-30",
+                                  "--timeout", TIMEOUT])
+        assert res.exit_code == 0 and "knob 2: +0.000 -> -30.000 deg" in res.stdout
+        st = _status(path)
+        assert (st["knobs"]["1"]["angle"], st["knobs"]["2"]["angle"]) == (4.5, -30.0)
+
+        # refused before anything moves: beyond the robot's travel (+-170), jog past it
+        res = runner.invoke(app, ["home", "--port", path, "--angle", "175", "--timeout", TIMEOUT])
+        assert res.exit_code == 1
+        assert "target +175.00 deg is beyond the travel limit +-170 deg; nothing moved" in _error_line(res)
+        res = runner.invoke(app, ["home", "--port", path, "--knob", "2", "--angle", "-165",
+                                  "--timeout", TIMEOUT])
+        assert res.exit_code == 0
+        res = runner.invoke(app, ["jog", "--port", path, "--knob", "2", "--by", "-8", "--timeout", TIMEOUT])
+        assert res.exit_code == 1 and "target -173.00 deg is beyond the travel limit" in _error_line(res)
+        res = runner.invoke(app, ["jog", "--port", path, "--knob", "3", "--by", "1", "--timeout", TIMEOUT])
+        assert res.exit_code == 1 and "has no knob 3" in _error_line(res)
+        st = _status(path)
+        assert (st["knobs"]["1"]["angle"], st["knobs"]["2"]["angle"]) == (4.5, -165.0)
+
+        # home: every knob back to 0, from 165 deg away (8 s of motion at 20 deg/s: the reply
+        # deadline grows by the motion, so the 1 s default deadline is enough)
+        res = runner.invoke(app, ["home", "--port", path])
+        assert res.exit_code == 0, res.output
+        assert "knob 2: -165.000 -> +0.000 deg" in res.stdout
+        st = _status(path)
+        assert (st["knobs"]["1"]["angle"], st["knobs"]["2"]["angle"]) == (0.0, 0.0)
+
+
+def test_home_fault_says_where_the_knobs_are():
+    with sim_robot("--fault", "error@2=E_MOTOR") as path:
+        assert runner.invoke(app, ["jog", "--port", path, "--knob", "2", "--by", "5",
+                                   "--timeout", TIMEOUT]).exit_code == 0
+        res = runner.invoke(app, ["home", "--port", path, "--timeout", TIMEOUT])
+        assert res.exit_code == 1
+        line = _error_line(res)
+        assert "E_MOTOR" in line and "motors stopped, knobs held where they are" in line
+        assert "knob 1 last reported at +0.00 deg" in line and "knob 2 last reported at +5.00 deg" in line
+
+
+# ------------------------------------------------------------------------------------------
+# usage errors exit 2 (before connecting), bad data and faults exit 1
+# ------------------------------------------------------------------------------------------
+PORTLESS = "/nonexistent/tty"
+
+
+@pytest.mark.parametrize("args, option", [
+    (["play", "X", "--port", PORTLESS, "-o", "Y", "--timeout", "nan"], "--timeout"),
+    (["play", "X", "--port", PORTLESS, "-o", "Y", "--timeout", "0"], "--timeout"),
+    (["play", "X", "--port", PORTLESS, "-o", "Y", "--max-speed", "-5"], "--max-speed"),
+    (["play", "X", "--port", PORTLESS, "-o", "Y", "--travel-limit", "inf"], "--travel-limit"),
+    (["status", "--port", PORTLESS, "--timeout", "-1"], "--timeout"),
+    (["status", "--port", PORTLESS, "--baud", "-9600"], "--baud"),
+    (["status", "--port", PORTLESS, "--format", "csv"], "--format"),
+    (["home", "--port", PORTLESS, "--speed", "nan"], "--speed"),
+    (["home", "--port", PORTLESS, "--speed", "500"], "--speed"),
+    (["home", "--port", PORTLESS, "--angle", "200"], "--angle"),
+    (["home", "--port", PORTLESS, "--knob", "0"], "--knob"),
+    (["jog", "--port", PORTLESS, "--knob", "1", "--by", "nan"], "--by"),
+    (["jog", "--port", PORTLESS, "--knob", "1", "--by", "11"], "--by"),
+    (["jog", "--port", PORTLESS, "--knob", "1"], "--by"),
+    (["jog", "--port", PORTLESS, "--knob", "1", "--by", "1", "--max-step", "0"], "--max-step"),
+    (["sim-robot", "--catheter", "ice-z"], "--catheter"),
+    (["sim-robot", "--shape", "alpha=abc"], "--shape"),
+    (["sim-robot", "--fault", "boom@1"], "--fault"),
+    (["sim-robot", "--effect", "bogus"], "--effect"),
+    (["sim-robot", "--knobs", "3"], "--knobs"),
+    (["sim-robot", "--knobs", "1,1"], "--knobs"),
+    (["sim-robot", "--latency-ms", "nan"], "--latency-ms"),
+    (["sim-robot", "--travel-limit", "nan"], "--travel-limit"),
+    (["sim-robot", "--max-speed", "0"], "--max-speed"),
+    (["sim-robot", "--seed", "-1"], "--seed"),
+    (["sim-robot", "--rotation", "inf"], "--rotation"),
+    (["sim-robot", "--name", "x" * 40], "--name"),
+])
+def test_bad_options_are_usage_errors(args, option):
+    res = runner.invoke(app, args)
+    assert res.exit_code == 2, (args, res.output)
+    assert option in res.output and "Traceback" not in res.output
+
+
+def test_sim_robot_names_what_it_refuses():
+    res = runner.invoke(app, ["sim-robot", "--catheter", "ice-z"])
+    assert "unknown virtual catheter 'ice-z'" in res.output
+    res = runner.invoke(app, ["sim-robot", "--fault", "boom@1"])
+    assert "unknown fault 'boom'" in res.output
+
+
 def test_help_has_examples():
-    for cmd in ("play", "sim-robot"):
+    for cmd in ("play", "sim-robot", "status", "home", "jog", "sweep"):
         res = runner.invoke(app, [cmd, "--help"])
         assert res.exit_code == 0 and "Example" in res.output
 

@@ -89,7 +89,8 @@ def test_compensate_with_the_augmented_model_uses_its_effects(files, tmp_path):
     write_run(tmp_path / "traj.csv", Run({"t": t, "r1": r}, {"shape": "alpha=90,theta=0"}))
     errs = []
     for m in (d / "model.json", tmp_path / "aug.json"):
-        res = invoke("compensate", tmp_path / "traj.csv", "--model", m, "-o", tmp_path / "cmd.csv")
+        res = invoke("compensate", tmp_path / "traj.csv", "--model", m, "-o", tmp_path / "cmd.csv",
+                     "--allow-fast")
         assert res.exit_code == 0, res.output
         cmd = read_run(tmp_path / "cmd.csv")
         run = twin.simulate_motion(CAT, Shape.parse("alpha=90,theta=0"), commands=cmd, effects=[LATENCY], seed=1)

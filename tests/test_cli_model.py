@@ -39,7 +39,8 @@ def files(tmp_path):
 
 
 def test_compensate_then_predict_reproduces_the_reference(files):
-    res = invoke("compensate", files / "traj.csv", "--model", files / "model.json", "-o", files / "cmd.csv")
+    res = invoke("compensate", files / "traj.csv", "--model", files / "model.json", "-o", files / "cmd.csv",
+                 "--allow-fast")  # the inverse's jumps at reversals: beyond the default speed limit
     assert res.exit_code == 0, res.output
     cmd = read_run(files / "cmd.csv")
     assert cmd.meta["controller"] == "comp+shift"
@@ -56,7 +57,7 @@ def test_compensate_then_predict_reproduces_the_reference(files):
 
 def test_ignore_shift_is_compensation_only(files):
     res = invoke("compensate", files / "traj.csv", "--model", files / "model.json", "-o", files / "c.csv",
-                 "--ignore-shift")
+                 "--ignore-shift", "--allow-fast")
     assert res.exit_code == 0, res.output
     cmd = read_run(files / "c.csv")
     assert cmd.meta["controller"] == "comp"
@@ -116,7 +117,8 @@ def test_compensate_warns_outside_the_identified_range(files):
     assert res.exit_code == 0, res.output
     t = np.arange(0, 5, 0.01)
     write_run(files / "big.csv", Run({"t": t, "r1": 90 * np.sin(t)}, {}))
-    res = invoke("compensate", files / "big.csv", "--model", files / "id.json", "-o", files / "o.csv")
+    res = invoke("compensate", files / "big.csv", "--model", files / "id.json", "-o", files / "o.csv",
+                 "--allow-fast")
     assert res.exit_code == 0
     assert "outside the identified range" in res.stderr
 

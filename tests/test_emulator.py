@@ -5,6 +5,7 @@ mocked above the transport.
 """
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import replace
@@ -358,3 +359,150 @@ def test_the_reply_deadline_grows_by_the_dwell(server):
         _fault(server, "delay", value="0.5")
         with pytest.raises(LinkError, match="no reply"):
             dev.move(1, 2.0, 5.0)  # no dwell: the plain 0.3 s deadline
+
+
+# ------------------------------------------------------------------------------------------
+# device hygiene (issue 12): limits, readiness, closing the pty
+# ------------------------------------------------------------------------------------------
+def test_handshake_announces_the_devices_limits(device):
+    assert device.info.extra["travel"] == "170" and device.info.extra["max_speed"] == "1000"
+    from hystcli.robot import device_limits
+
+    assert device_limits(device.info) == {"travel": 170.0, "max_speed": 1000.0}
+
+
+@pytest.mark.parametrize("fields, words", [
+    (("1", "10.0", "5000.0"), "speed 5000 deg/s beyond the motor's 1000"),
+    # 170 deg at 0.001 deg/s: 1.7e5 s of motion, 1.7e8 samples of 1 ms the twin would allocate
+    (("1", "170.0", "0.001"), "move of 1.7e+05 s beyond the 120 s limit"),
+    (("2", "-100.0", "0.5"), "move of 200 s beyond the 120 s limit"),
+])
+def test_absurd_speeds_and_moves_are_device_errors_and_nothing_moves(server, fields, words):
+    port = serial.Serial(server.path, timeout=float(5))
+    try:
+        port.write(encode_frame(3, "MOVE", *fields))
+        reply = decode_frame(port.readline())
+        assert (reply.seq, reply.verb, reply.args[0]) == (3, "ERR", "E_ARG")
+        assert words in " ".join(reply.args[1:])
+        port.write(encode_frame(4, "STATE", int(fields[0])))
+        assert float(decode_frame(port.readline()).args[1]) == 0.0
+    finally:
+        port.close()
+
+
+def test_the_longest_move_within_the_limit_is_served(device):
+    # 120 s of motion exactly (12 deg at 0.1 deg/s): served, and the reply deadline grows by
+    # the motion (here it is simulated time, answered at once)
+    s = device.move(1, 12.0, 0.1)
+    assert s.angle == pytest.approx(12.0, abs=1e-4)
+
+
+def test_emulator_refuses_bad_limits():
+    for kw in ({"max_speed": 0.0}, {"travel_limit": math.nan}, {"max_move_time": -1.0},
+               {"default_speed": 50.0, "max_speed": 20.0}):
+        with pytest.raises(DataError):
+            DeviceEmulator(_twin(), **kw)
+
+
+def test_reply_deadline_grows_by_the_motion_the_host_asked_for(server):
+    # a robot that takes 1.5 s to answer (a delay fault stands in for a 2 s move of 10 deg at
+    # 5 deg/s): with the knob's angle known (a STATE first) the 0.5 s deadline grows by 2 s of
+    # motion and the reply is in time; without it (a fresh driver, the knob's angle unknown) the
+    # 0.5 s deadline holds and the slow reply is a link error.
+    with Device(server.path, timeout=0.5) as dev:
+        dev.state(1)
+        _fault(server, "delay", value="1.5")
+        assert dev.move(1, 10.0, 5.0).angle == pytest.approx(10.0, abs=1e-4)
+    with Device(server.path, timeout=0.5) as dev:
+        _fault(server, "delay", value="1.5")
+        with pytest.raises(LinkError, match="no reply to MOVE"):
+            dev.move(2, 10.0, 5.0)
+
+
+WARM_SCRIPT = r"""
+import sys
+import numba.core.dispatcher as dispatcher
+from hystcli.calibration import calibrated_catheter
+from hystcli.device import Device
+from hystcli.emulator import serve
+from hystcli.twin import LiveTwin
+
+server = serve(LiveTwin(calibrated_catheter("ice-a"), effects=None, seed=0))
+# from here on, any numba compilation or cache load (what made a fresh robot's first MOVE take
+# 0.2-0.9 s idle, seconds under load) is a fault of the device: it answers E_MOTOR
+def refuse(self, *args, **kw):
+    raise RuntimeError("numba work while serving a MOVE")
+dispatcher.Dispatcher._compile_for_args = refuse
+with Device(server.path, timeout=30) as dev:
+    dev.move(1, 2.0, 20.0, dwell=0.05, mean=0.02)
+    dev.move(2, -3.0, 20.0)
+    dev.move(1, 0.0, 40.0)
+server.shutdown()
+print("ok")
+"""
+
+
+@pytest.mark.parametrize("warm", [True, False])
+def test_a_served_twin_is_warm_before_its_first_move(warm):
+    """The root cause of the device tests failing under load: the first MOVE of a fresh robot
+    loaded (or compiled) the twin's numba functions. A fresh process serves the calibrated
+    catheter (default effects), then forbids numba any further compilation: the MOVEs must still
+    be answered. The control (warm-up disabled) shows the check has teeth."""
+    import subprocess
+    import sys
+
+    script = WARM_SCRIPT if warm else WARM_SCRIPT.replace(
+        "from hystcli.emulator import serve",
+        "from hystcli.emulator import DeviceEmulator, serve\nDeviceEmulator.warm_up = lambda self: False")
+    res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
+    if warm:
+        assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr
+    else:
+        assert res.returncode != 0 and "numba work while serving a MOVE" in res.stderr
+
+
+def test_warm_up_leaves_the_served_twin_untouched():
+    # the same moves on a twin that was never served: identical readings, noise included
+    emu = DeviceEmulator(_twin(seed=9))
+    assert emu.warm_up() is True
+    ref = _twin(seed=9)
+    for q in (3.0, -2.0):
+        reply = decode_frame(emu.handle_line(encode_frame(1, "MOVE", 1, q, 20.0))[0][0])
+        rq, rc, ry = ref.move(1, q, speed_deg_s=20.0)
+        assert float(reply.args[2]) == pytest.approx(rc, abs=1e-4)
+        assert float(reply.args[3]) == pytest.approx(ry, abs=1e-4)
+
+
+def test_close_pty_from_another_thread_never_touches_a_reused_descriptor(tmp_path):
+    """The race of the old _close_fds: closing the pty from another thread while the serving
+    thread still held its descriptor (here: sleeping before a delayed reply). The freed number
+    goes to the next open in the process; the serving thread then wrote its reply into that
+    file. Now the serving thread closes its own descriptors (close_pty asks it and waits), so a
+    file opened after close_pty returns is never written by the server."""
+    server = serve(_twin(seed=1))
+    port = serial.Serial(server.path, timeout=5)
+    try:
+        server.emulator.inject(Fault("delay", at=1, value="0.6"))
+        port.write(encode_frame(1, "MOVE", 1, 1.0))
+        deadline = time.monotonic() + 30
+        while server.emulator.moves < 1 and time.monotonic() < deadline:
+            time.sleep(0.01)  # readiness: the server has the MOVE and sleeps before replying
+        master = server._master
+        server.close_pty()
+        assert server.closed
+        # take the lowest free descriptors until the master's old number is ours
+        files, target = [], None
+        for _ in range(64):
+            fd = os.open(tmp_path / f"f{len(files)}", os.O_RDWR | os.O_CREAT)
+            files.append(fd)
+            if fd == master:
+                target = fd
+                break
+        time.sleep(1.0)  # past the delayed reply
+        if target is not None:
+            assert os.fstat(target).st_size == 0, "the server wrote into a file it did not own"
+        for fd in files:
+            os.close(fd)
+    finally:
+        port.close()
+        server.shutdown()

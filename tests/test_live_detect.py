@@ -11,10 +11,6 @@ eqs. 1-4, never from an output of detect-shift.
 from __future__ import annotations
 
 import math
-import select
-import signal
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
@@ -25,6 +21,7 @@ from hystcli.cli import app
 from hystcli.device import Device
 from hystcli.io import load_model, save_model
 from hystcli.model import KnobIdentification, Model
+from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - test_rotate_shift imports them from here
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot --catheter ice-a` serves
 runner = CliRunner()
@@ -62,44 +59,11 @@ def model_path(tmp_path_factory) -> Path:
     return path
 
 
-def start_sim_robot(*args: str) -> tuple[subprocess.Popen, str]:
-    """Start `hyst sim-robot` and return (process, pty path); the caller must stop() it."""
-    proc = subprocess.Popen([sys.executable, "-m", "hystcli", "sim-robot", "--quiet", *args],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    try:
-        ready, _, _ = select.select([proc.stdout], [], [], 60)
-        if not ready:
-            raise AssertionError("sim-robot printed no device path within 60 s")
-        path = proc.stdout.readline().strip()
-        if not path.startswith("/dev/"):
-            raise AssertionError(f"sim-robot printed {path!r}; stderr: "
-                                 f"{proc.stderr.read() if proc.poll() is not None else ''}")
-    except BaseException:
-        stop(proc)
-        raise
-    return proc, path
-
-
-def stop(proc: subprocess.Popen) -> None:
-    """SIGTERM, then kill after 20 s; never leaves the process behind."""
-    try:
-        if proc.poll() is None:
-            proc.send_signal(signal.SIGTERM)
-        proc.wait(timeout=20)
-    except subprocess.TimeoutExpired:
-        pass
-    finally:
-        if proc.poll() is None:
-            proc.kill()
-            proc.wait(timeout=10)
-        for f in (proc.stdout, proc.stderr):
-            if f is not None:
-                f.close()
-
-
-def detect(model_path: Path, port: str, out: Path, *extra: str):
+def detect(model_path: Path, port: str, out: Path, *extra: str, timeout: str = TIMEOUT):
+    """`hyst detect-shift --port` with a generous reply deadline unless told (a loaded machine
+    must not turn a slow answer into a failed search)."""
     return runner.invoke(app, ["detect-shift", "--model", str(model_path), "--port", port,
-                               "-o", str(out), "--quiet", *extra])
+                               "-o", str(out), "--quiet", "--timeout", timeout, *extra])
 
 
 # ---------------------------------------------------------------------------------------------
@@ -178,7 +142,7 @@ def test_detect_shift_live_returns_knobs_home(model_path, tmp_path):
     try:
         res = detect(model_path, path, tmp_path / "m.json", "--max-travel", "40")
         assert res.exit_code == 0, res.output
-        with Device(path, timeout=5.0) as dev:
+        with Device(path, timeout=float(TIMEOUT)) as dev:
             for k in (1, 2):
                 assert abs(dev.state(k).angle) < 1e-3
     finally:
@@ -204,7 +168,9 @@ def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive
     out = tmp_path / "shifted.json"
     proc, path = start_sim_robot("--fault", fault)
     try:
-        res = detect(model_path, path, out)
+        # a deadline that must fire on the silent robot, twice (the step, the return): 2 s, far
+        # above a warmed robot's answer (about 1 ms) even on a loaded machine
+        res = detect(model_path, path, out, timeout="2")
         assert res.exit_code == 1, res.output
         errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
         assert len(errors) == 1, res.output
@@ -215,7 +181,7 @@ def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive
         if alive:
             # the message says the knob went back, and a fresh connection confirms it
             assert "returned to 0 deg" in errors[0], errors[0]
-            with Device(path, timeout=5.0) as dev:
+            with Device(path, timeout=float(TIMEOUT)) as dev:
                 assert abs(dev.state(1).angle) < 1e-3
                 assert abs(dev.state(2).angle) < 1e-3
         else:
@@ -236,7 +202,7 @@ def test_contact_spike_cli_stops_and_writes_nothing(model_path, tmp_path):
         assert not out.exists()
         errors = [line for line in res.output.splitlines() if line.startswith("Error:")]
         assert len(errors) == 1 and "current" in errors[0], res.output
-        with Device(path, timeout=5.0) as dev:
+        with Device(path, timeout=float(TIMEOUT)) as dev:
             assert abs(dev.state(1).angle) < 1e-3
     finally:
         stop(proc)
@@ -255,7 +221,7 @@ def test_contact_spike_live_probe_safety_stop():
 
     server = serve(LiveTwin(CAT, seed=1), faults=[Fault("spike", 5, 1, "5000")])
     try:
-        probe = open_probe(server.path, knob=1, timeout=5.0, current_ceiling=2000.0)
+        probe = open_probe(server.path, knob=1, timeout=float(TIMEOUT), current_ceiling=2000.0)
         try:
             with pytest.raises(SafetyStop, match=r"ceiling 2000 mA.*returned to 0 deg"):
                 detect_shift(_model(), probe, 1)
@@ -264,5 +230,51 @@ def test_contact_spike_live_probe_safety_stop():
             assert abs(probe.device.state(1).angle) < 1e-3
         finally:
             probe.device.close()
+    finally:
+        server.shutdown()
+
+
+# ---------------------------------------------------------------------------------------------
+# the reply deadline and the connection (issue 12)
+# ---------------------------------------------------------------------------------------------
+def test_timeout_is_the_reply_deadline(model_path, tmp_path):
+    """The 3rd MOVE is answered 1.5 s late: with --timeout 0.5 its deadline (0.5 s + the
+    0.35 s dwell + 0.1 s of motion) passes first and the search stops, saying the deadline;
+    with --timeout 10 the search waits for it and succeeds."""
+    with sim_robot("--fault", "delay@3=1.5") as path:
+        res = detect(model_path, path, tmp_path / "a.json", timeout="0.5")
+    assert res.exit_code == 1 and "no reply to MOVE" in res.output and "within 0.5 s" in res.output
+    assert not (tmp_path / "a.json").exists()
+    with sim_robot("--fault", "delay@3=1.5") as path:
+        res = detect(model_path, path, tmp_path / "b.json", "--max-travel", "40")
+    assert res.exit_code == 0, res.output
+    for k in (1, 2):
+        assert abs(load_model(tmp_path / "b.json").knob(k).offset) <= 0.5  # straight shaft
+
+
+@pytest.mark.parametrize("bad", ["0", "-1", "nan", "inf", "abc"])
+def test_bad_timeout_is_a_usage_error(model_path, tmp_path, bad):
+    res = detect(model_path, "/dev/null-no-port", tmp_path / "x.json", timeout=bad)
+    assert res.exit_code == 2 and "--timeout" in res.output, res.output
+    assert not (tmp_path / "x.json").exists()
+
+
+def test_bad_baud_is_a_usage_error(model_path, tmp_path):
+    res = detect(model_path, "/dev/null-no-port", tmp_path / "x.json", "--baud", "-9600")
+    assert res.exit_code == 2 and "--baud" in res.output, res.output
+
+
+def test_one_connection_for_every_knob(model_path, tmp_path):
+    """Both knobs are searched over one connection: one handshake (the port used to be opened,
+    and the device greeted, once per knob)."""
+    from hystcli.emulator import serve
+    from hystcli.twin import LiveTwin
+
+    server = serve(LiveTwin(CAT, seed=2))
+    try:
+        res = detect(model_path, server.path, tmp_path / "m.json", "--max-travel", "40")
+        assert res.exit_code == 0, res.output
+        assert server.emulator.hellos == 1
+        assert server.emulator.stops >= 1  # the connection's end stopped the motors
     finally:
         server.shutdown()

@@ -1,33 +1,59 @@
-"""Commands of the live robot link: ``sim-robot`` (the twin behind a pseudo-terminal) and ``play``."""
+"""Commands of the live robot link: ``sim-robot`` (the twin behind a pseudo-terminal), ``sweep``,
+``play``, and the manual ones: ``status``, ``home``, ``jog``.
+
+Each parses, calls one core function of :mod:`hystcli.robot` (or the emulator), renders. Every
+command that moves a knob checks the whole request against the limits of
+:mod:`hystcli.cli.robot_opts` (tightened by what the robot announces) before the first MOVE.
+"""
 from __future__ import annotations
 
 import signal
 import sys
 from pathlib import Path
-from typing import Annotated, List, Optional
+from typing import Annotated, Any, List, Optional
 
 import typer
 
 from .. import io
 from ..calibration import CALIBRATED_NAMES, calibrated_catheter
-from ..errors import DataError
+from ..errors import DataError, HystError
 from ..model import Shape
-from .app import BaudOpt, EffectOpt, OutOpt, QuietOpt, SeedOpt, command, effects_option, info, stderr_is_tty
+from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
+from .app import (BaudOpt, EffectOpt, OutOpt, QuietOpt, command, echo_json, effects_option,
+                  fail, info, stderr_is_tty)
+from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxSpeedOpt, MoveSpeedOpt, TableOrJson,
+                         TimeoutOpt, TravelLimitOpt, finite, limit_hint, limits, positive)
+
+PortArg = Annotated[str, typer.Option("--port", help="Serial port of the robot (name or pyserial URL).",
+                                      show_default=False)]
+DEVICE_TIMEOUT = 1.0
+"""Default reply deadline (s) of the device commands: a robot controller answers in
+milliseconds; the motion's own duration and any dwell are added to it per MOVE."""
+
+
+def _usage(param: str, exc: Exception) -> typer.BadParameter:
+    """An option value the core refused, as a usage error (exit 2) naming the option."""
+    return typer.BadParameter(str(exc), param_hint=param)
 
 
 @command("sim-robot", epilog="Example: hyst sim-robot --catheter ice-a --shape 'alpha=90,theta=0' "
-                             "--latency-ms 2   (then: hyst play cmds.csv --port /dev/pts/N -o run.csv)")
+                             "--latency-ms 2   (then: hyst status --port /dev/pts/N)")
 def sim_robot_cmd(
     catheter: Annotated[str, typer.Option(
         help=f"Virtual catheter ({', '.join(CALIBRATED_NAMES)}): the calibrated one `hyst simulate` "
              "and the sample data use.")] = "ice-a",
     shape: Annotated[str, typer.Option(help="Shaft shape: 'straight' or 'alpha=90,theta=0;...' (deg).")] = "straight",
-    rotation: Annotated[float, typer.Option(help="Bulk rotation of the catheter body (deg).")] = 0.0,
+    rotation: Annotated[float, typer.Option(callback=finite, help="Bulk rotation of the catheter body (deg).")] = 0.0,
     effect: EffectOpt = None,
-    seed: SeedOpt = 0,
-    latency_ms: Annotated[float, typer.Option(min=0.0, help="Answer latency per frame (ms).")] = 0.0,
+    seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of every random draw (same seed, same bytes).")] = 0,
+    latency_ms: Annotated[float, typer.Option(min=0.0, callback=finite, help="Answer latency per frame (ms).")] = 0.0,
     knobs: Annotated[str, typer.Option(help="Knobs the robot drives, e.g. '1,2' or '1'.")] = "1,2",
-    travel_limit: Annotated[float, typer.Option(min=1.0, help="Largest |knob angle| accepted (deg).")] = 170.0,
+    travel_limit: Annotated[float, typer.Option(
+        min=1.0, callback=finite, help="Largest |knob angle| accepted (deg); announced in the handshake.")] = 170.0,
+    max_speed: Annotated[float, typer.Option(
+        "--max-speed", min=1.0, callback=finite,
+        help="Fastest knob speed its motors do (deg/s); a faster MOVE is refused (E_ARG). "
+             "Announced in the handshake.")] = 1000.0,
     name: Annotated[str, typer.Option(help="Device name sent in the handshake.")] = "hyst-sim",
     fault: Annotated[Optional[List[str]], typer.Option(
         "--fault", help="Inject a fault (tests): KIND@N[xCOUNT][=VALUE], KIND one of silent, garble, "
@@ -36,10 +62,11 @@ def sim_robot_cmd(
 ) -> None:
     """Serve the virtual catheter as a robot on a pseudo-terminal until Ctrl-C or SIGTERM.
 
-    Prints the device path (one line on stdout) to pass as --port to `hyst play` or
-    `hyst detect-shift`. The device speaks the hyst line protocol (docs/protocol.md) with the
-    optional features dwell and mean. The catheter and its effects are those of
-    `hyst simulate` given the same --catheter and --effect.
+    Prints the device path (one line on stdout) to pass as --port to `hyst play`, `status`,
+    `home`, `jog` or `detect-shift`, once the device is ready to answer (its twin warmed up).
+    The device speaks the hyst line protocol (docs/protocol.md) with the optional features dwell
+    and mean. The catheter and its effects are those of `hyst simulate` given the same
+    --catheter and --effect.
     """
     from ..effects import format_effects
     from ..emulator import Fault, serve
@@ -49,25 +76,42 @@ def sim_robot_cmd(
         knob_list = tuple(int(k) for k in knobs.split(","))
     except ValueError:
         raise typer.BadParameter(f"{knobs!r} is not a comma-separated list of knobs", param_hint="--knobs")
-    if not knob_list or any(k not in (1, 2) for k in knob_list):
-        raise typer.BadParameter("knobs are 1 and/or 2", param_hint="--knobs")
-    if not name or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
-        raise typer.BadParameter("a printable name without spaces, '*' or '='", param_hint="--name")
-    # the user-facing catheters are the calibrated ones: the same lookup as `hyst simulate`
-    twin = LiveTwin(calibrated_catheter(catheter), shape=Shape.parse(shape), rotation=rotation,
-                    effects=effects_option(effect), seed=seed, knobs=knob_list)
-    faults = [Fault.parse(f) for f in fault or ()]
+    if not knob_list or any(k not in (1, 2) for k in knob_list) or len(set(knob_list)) != len(knob_list):
+        raise typer.BadParameter("knobs are 1 and/or 2, each once", param_hint="--knobs")
+    if not name or len(name) > 32 or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
+        raise typer.BadParameter("at most 32 printable characters without spaces, '*' or '='",
+                                 param_hint="--name")
+    # every option value the core parses is a usage error when refused (exit 2)
+    try:
+        cath = calibrated_catheter(catheter)
+    except HystError as exc:
+        raise _usage("--catheter", exc) from None
+    try:
+        shp = Shape.parse(shape)
+    except HystError as exc:
+        raise _usage("--shape", exc) from None
+    try:
+        effs = effects_option(effect)
+    except HystError as exc:
+        raise _usage("--effect", exc) from None
+    try:
+        faults = [Fault.parse(f) for f in fault or ()]
+    except HystError as exc:
+        raise _usage("--fault", exc) from None
+    twin = LiveTwin(cath, shape=shp, rotation=rotation, effects=effs, seed=seed, knobs=knob_list)
     server = serve(twin, latency=latency_ms / 1000.0, faults=faults, name=name,
-                   travel_limit=travel_limit, background=False)
+                   travel_limit=travel_limit, max_speed=max_speed, background=False)
 
     def _terminate(signum, frame):  # SIGTERM ends the server like Ctrl-C
         raise KeyboardInterrupt
 
     previous = signal.signal(signal.SIGTERM, _terminate)
     try:
+        # the path is printed once the device can answer at full speed (serve warmed it up):
+        # a client may connect and start moving at once
         sys.stdout.write(server.path + "\n")
         sys.stdout.flush()
-        info(f"serving {catheter} ({Shape.parse(shape)}, rotation {rotation:g} deg, effects "
+        info(f"serving {catheter} ({shp}, rotation {rotation:g} deg, effects "
              f"{format_effects(twin.effects)}) on {server.path}; "
              "Ctrl-C to stop", quiet)
         server.serve_forever()
@@ -109,34 +153,59 @@ def sweep_cmd(
          f"{peak_speed:g} deg/s, {len(run)} samples ({t[-1]:.1f} s)", quiet)
 
 
-@command("play", epilog="Example: hyst play cmds.csv --port /dev/ttyUSB0 -o run.csv")
+def _interrupted(exc: KeyboardInterrupt) -> None:
+    """Ctrl-C while knobs moved: exit 130 with where they are (the core's statement)."""
+    fail(f"interrupted; {exc}" if str(exc) else "interrupted", 130)
+
+
+@command("play", epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
+                        "--port /dev/ttyUSB0 -o sweep_knob1.csv")
 def play_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Command trajectory CSV with t and q1/q2 "
                                                "(e.g. from `hyst compensate`).", show_default=False)],
-    port: Annotated[str, typer.Option("--port", help="Serial port of the robot (name or pyserial URL).")],
+    port: PortArg,
     output: OutOpt,
     baud: BaudOpt = 115200,
     fast: Annotated[bool, typer.Option("--fast", help="Send each command as soon as the previous one "
                                        "is answered instead of at the file's timing.")] = False,
-    timeout: Annotated[float, typer.Option(min=0.001, help="Deadline of each reply (s).")] = 1.0,
+    timeout: TimeoutOpt = DEVICE_TIMEOUT,
+    travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
+    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    allow_fast: AllowFastOpt = False,
+    no_return: Annotated[bool, typer.Option(
+        "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
+                            "returning them to where the play began.")] = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Play the knob commands of TRAJECTORY on the robot and record t, q, c (and y) to a run CSV.
 
-    The trajectory's metadata is kept, the device identity added. On any fault or Ctrl-C every
-    motor is stopped, nothing is written, and the exit code is non-zero.
+    The whole file is checked before the first MOVE: finite values, increasing t, knobs the
+    robot has, every command within --travel-limit and every step within --max-speed (the
+    robot's own announced limits when tighter). On any fault or Ctrl-C every motor is stopped,
+    the knobs go back to where they began (--no-return: they hold), the error says where each
+    knob is, nothing is written, and the exit code is non-zero.
     """
-    from ..device import Device, play_trajectory
+    from ..robot import Interrupted, check_trajectory, play_trajectory
+    from ..safety import LimitExceeded
 
     io.check_not_input(output, [trajectory])
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():
         raise DataError(f"{output}: the folder {folder} does not exist")
     run = io.read_run(trajectory, require=("t",))
-    with Device(port, baud, timeout) as device:
+    lim = limits(travel_limit, max_speed)
+    with _open(port, baud, timeout) as device:
         info(f"connected to {device.info.name} ({device.info.catheter}, knobs "
              f"{','.join(map(str, device.info.knobs))}, tracker {'yes' if device.info.tracker else 'no'})",
              quiet)
+        try:
+            check = check_trajectory(device, run, lim, allow_fast=allow_fast)
+        except LimitExceeded as exc:
+            raise type(exc)(f"{exc}{limit_hint(exc)}", exc.check) from None
+        info("checked: " + "; ".join(
+            f"knob {k} {m.q_min:+.1f}..{m.q_max:+.1f} deg, peak {m.peak_speed:.1f} deg/s"
+            for k, m in check.knobs.items()) + f" (limits +-{check.limits.travel:g} deg, "
+            f"{check.limits.max_speed:g} deg/s)", quiet)
         progress = None
         if not quiet and stderr_is_tty():
             step = max(1, len(run) // 20)
@@ -144,7 +213,159 @@ def play_cmd(
             def progress(i: int, n: int) -> None:
                 if i % step == 0 or i == n:
                     typer.echo(f"\rplaying {i}/{n}", err=True, nl=i == n)
-        result = play_trajectory(device, run, paced=not fast, progress=progress)
+        try:
+            result = play_trajectory(device, run, paced=not fast, limits=lim, allow_fast=allow_fast,
+                                     return_on_abort=not no_return, progress=progress)
+        except Interrupted as exc:
+            _interrupted(exc)
     result = result.with_meta(trajectory=trajectory.name, port=port)
     io.write_run(output, result, inputs=[trajectory])
-    info(f"wrote {output} ({len(result)} samples, max lag {result.meta['play_max_lag_s']} s)", quiet)
+    capped = int(result.meta["play_speed_capped"])
+    info(f"wrote {output} ({len(result)} samples, max lag {result.meta['play_max_lag_s']} s"
+         + (f", {capped} steps sent at the {result.meta['play_speed_limit']} deg/s limit" if capped else "")
+         + ")", quiet)
+
+
+# --------------------------------------------------------------------------------------------
+# status, home, jog
+# --------------------------------------------------------------------------------------------
+def _open(port: str, baud: int, timeout: float) -> Any:
+    from ..device import Device
+
+    if baud <= 0:  # pyserial's own refusal would come out as a link error (exit 1)
+        raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
+    return Device(port, baud, timeout)
+
+
+def _fmt_tip(tip: float | None) -> str:
+    return "-" if tip is None else f"{tip:+.3f}"
+
+
+@command("status", epilog="Example: hyst status --port /dev/ttyUSB0 --format json")
+def status_cmd(
+    port: PortArg,
+    baud: BaudOpt = 115200,
+    timeout: TimeoutOpt = DEVICE_TIMEOUT,
+    fmt: FormatTJOpt = TableOrJson.table,
+) -> None:
+    """Show who the robot is (handshake) and each knob's angle, motor current and tip angle.
+
+    Reads only (HELLO and one STATE per knob): nothing moves, no STOP is sent.
+    """
+    from ..robot import status
+
+    device = _open(port, baud, timeout)
+    try:
+        st = status(device)
+    finally:
+        device.close()  # not the context manager: it would send STOP, and status only reads
+    if fmt == TableOrJson.json:
+        echo_json(st.to_dict())
+        return
+    i = st.info
+    typer.echo(f"device {i.name} (protocol {i.protocol}), catheter {i.catheter}, knobs "
+               f"{','.join(map(str, i.knobs))}, tracker {'yes' if i.tracker else 'no'}, features "
+               f"{','.join(i.features) or 'none'}")
+    if st.limits:
+        typer.echo("limits: " + ", ".join(
+            f"travel +-{v:g} deg" if k == "travel" else f"max speed {v:g} deg/s"
+            for k, v in st.limits.items()))
+    other = {k: v for k, v in i.extra.items() if k not in st.limits}
+    if other:
+        typer.echo("other: " + " ".join(f"{k}={v}" for k, v in other.items()))
+    typer.echo(f"{'knob':>4}  {'angle (deg)':>11}  {'current (mA)':>12}  {'tip (deg)':>9}")
+    for s in st.knobs:
+        typer.echo(f"{s.knob:>4}  {s.angle:>+11.3f}  {s.current:>12.2f}  {_fmt_tip(s.tip):>9}")
+
+
+def _render_moves(moves: dict, fmt: TableOrJson, quiet: bool) -> None:
+    if fmt == TableOrJson.json:
+        echo_json({"knobs": {str(k): {"from": b.angle, "to": a.angle, "current": a.current, "tip": a.tip}
+                             for k, (b, a) in moves.items()}})
+    elif not quiet:
+        for k, (b, a) in moves.items():
+            typer.echo(f"knob {k}: {b.angle:+.3f} -> {a.angle:+.3f} deg (current {a.current:.1f} mA, "
+                       f"tip {_fmt_tip(a.tip)} deg)")
+
+
+@command("home", epilog="Example: hyst home --port /dev/ttyUSB0            (every knob to 0 deg)\n\n"
+                        "         hyst home --port /dev/ttyUSB0 --knob 2 --angle 10")
+def home_cmd(
+    port: PortArg,
+    knob: Annotated[Optional[List[int]], typer.Option(
+        "--knob", min=1, max=9, help="Knob to move (repeatable; default: every knob of the robot).")] = None,
+    angle: Annotated[float, typer.Option(
+        "--angle", callback=finite, help="Target angle, deg (0: the knobs' zero, the straight-shaft rest).")] = 0.0,
+    speed: MoveSpeedOpt = DEFAULT_MOVE_SPEED,
+    travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
+    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    baud: BaudOpt = 115200,
+    timeout: TimeoutOpt = DEVICE_TIMEOUT,
+    fmt: FormatTJOpt = TableOrJson.table,
+    quiet: QuietOpt = False,
+) -> None:
+    """Move the knobs back to 0 deg (or --angle), one after the other, at --speed.
+
+    Every target is checked against the travel limit first. On a fault or Ctrl-C the motors
+    stop and the error says where each knob is.
+    """
+    from ..robot import Interrupted, home
+
+    _check_speed(speed, max_speed, travel_limit, abs(angle))
+    with _open(port, baud, timeout) as device:
+        try:
+            moves = home(device, knob or None, angle, speed=speed, limits=limits(travel_limit, max_speed))
+        except Interrupted as exc:
+            _interrupted(exc)
+    _render_moves(moves, fmt, quiet)
+
+
+JOG_MAX_STEP = 10.0
+"""Default largest jog (deg): a nudge to see a knob respond or to free it, not a move anywhere
+(`home --angle` moves anywhere); 10 deg is a quarter of the dead zone's width on the calibrated
+catheters, so one jog from rest does not bend the tip far."""
+
+
+@command("jog", epilog="Example: hyst jog --port /dev/ttyUSB0 --knob 1 --by -2.5")
+def jog_cmd(
+    port: PortArg,
+    knob: Annotated[int, typer.Option("--knob", min=1, max=9, help="Knob to move.", show_default=False)],
+    by: Annotated[float, typer.Option(
+        "--by", callback=finite, help="Relative angle, deg (signed).", show_default=False)],
+    max_step: Annotated[float, typer.Option(
+        "--max-step", callback=positive,
+        help="Largest |--by|, deg: a jog is a nudge, not a move anywhere.")] = JOG_MAX_STEP,
+    speed: MoveSpeedOpt = DEFAULT_MOVE_SPEED,
+    travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
+    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    baud: BaudOpt = 115200,
+    timeout: TimeoutOpt = DEVICE_TIMEOUT,
+    fmt: FormatTJOpt = TableOrJson.table,
+    quiet: QuietOpt = False,
+) -> None:
+    """Move one knob by a small relative angle from where it is.
+
+    Refused before anything moves when |--by| exceeds --max-step, the target the travel limit,
+    or --speed the speed limit.
+    """
+    from ..robot import Interrupted, jog
+
+    if abs(by) > max_step:
+        raise typer.BadParameter(f"|{by:g}| deg is beyond --max-step {max_step:g} deg", param_hint="--by")
+    _check_speed(speed, max_speed, travel_limit, 0.0)
+    with _open(port, baud, timeout) as device:
+        try:
+            moves = {knob: jog(device, knob, by, max_step=max_step, speed=speed,
+                               limits=limits(travel_limit, max_speed))}
+        except Interrupted as exc:
+            _interrupted(exc)
+    _render_moves(moves, fmt, quiet)
+
+
+def _check_speed(speed: float, max_speed: float, travel_limit: float, target: float) -> None:
+    """Options that contradict each other are usage errors, found before connecting."""
+    if speed > max_speed:
+        raise typer.BadParameter(f"{speed:g} deg/s is beyond --max-speed {max_speed:g}", param_hint="--speed")
+    if target > travel_limit:
+        raise typer.BadParameter(f"{target:g} deg is beyond --travel-limit {travel_limit:g}",
+                                 param_hint="--angle")

@@ -8,6 +8,9 @@ import typer
 
 from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
                   distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error, warn)
+from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
+from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxAccelOpt, MaxSpeedOpt, TableOrJson,
+                         TravelLimitOpt, limit_hint, limits)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
@@ -105,7 +108,8 @@ def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -
                  ("deg, omega in deg/deg; '-': fixed by assumption (current-only identification)",))
 
 
-@command("compensate", epilog="Example: hyst compensate traj.csv --model shifted.json -o commands.csv")
+@command("compensate", epilog="Example: hyst compensate sample_data/reference_periodic.csv --model "
+                              "shifted.json -o commands.csv --allow-fast")
 def compensate_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Desired trajectory CSV with t and r1/r2.",
                                                show_default=False)],
@@ -113,22 +117,59 @@ def compensate_cmd(
     output: OutOpt,
     ignore_shift: Annotated[bool, typer.Option(
         "--ignore-shift", help="Use offset 0 on every knob: the paper's Compensation-Only.")] = False,
+    travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
+    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    max_accel: MaxAccelOpt = None,
+    allow_fast: AllowFastOpt = False,
+    fmt: FormatTJOpt = TableOrJson.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Turn desired tip angles r1/r2 into knob commands q1/q2 through the inverse model.
 
     Keeps t, r and the metadata; sets `controller` (comp or comp+shift) and the offsets used.
+    Reports each knob's range, peak speed and peak acceleration, and refuses (writes nothing,
+    exit 1) commands beyond --travel-limit, or beyond --max-speed (--max-accel) unless
+    --allow-fast: where the tip must cross a flat part of the loop (the dead zone, the
+    backlash at a reversal) the inverse model jumps across it within one sample, which a motor
+    cannot follow at the file's timing.
     """
     from .. import compensation, io
+    from ..safety import LimitExceeded, check_motion, require_within
+
     io.check_not_input(output, [trajectory, model_path])
     model = io.load_model(model_path)
     traj = io.read_run(trajectory)
     result = compensation.compensate(model, traj, ignore_shift=ignore_shift)
+    # checked before anything is written: a refused file never exists
+    check = check_motion(result.run, limits(travel_limit, max_speed, max_accel), name=str(output))
+    try:
+        require_within(check, allow=("speed", "accel") if allow_fast else (), name=str(output),
+                       action="write")
+    except LimitExceeded as exc:
+        raise type(exc)(f"{exc}{limit_hint(exc)}", exc.check) from None
     for w in result.warnings:
         warn(w)
+    for v in check.violations:  # only what --allow-fast let through
+        warn(f"{v.message}: written as asked (--allow-fast)")
     io.write_run(output, result.run, inputs=[trajectory, model_path])
     info(f"wrote {output} (controller {result.run.meta['controller']}, offsets "
          + ", ".join(f"knob {k}: {o:+.2f} deg" for k, o in result.offsets.items()) + ")", quiet)
+    if fmt == TableOrJson.json:
+        echo_json({"output": str(output), "controller": result.run.meta["controller"],
+                   "offsets": {str(k): o for k, o in result.offsets.items()},
+                   "warnings": list(result.warnings), **check.to_dict()})
+    elif not quiet:
+        typer.echo(f"{'knob':>4}  {'offset':>7}  {'q min':>7}  {'q max':>7}  {'peak speed':>10}  "
+                   f"{'at t':>7}  {'peak accel':>11}  {'at t':>7}")
+        for k, m in check.knobs.items():
+            typer.echo(f"{k:>4}  {result.offsets[k]:>+7.2f}  {m.q_min:>+7.1f}  {m.q_max:>+7.1f}  "
+                       f"{m.peak_speed:>10.1f}  {m.peak_speed_t:>7.2f}  {m.peak_accel:>11.4g}  "
+                       f"{m.peak_accel_t:>7.2f}")
+        lim = check.limits
+        typer.echo(f"(deg, deg/s, deg/s^2, s; limits: travel +-{lim.travel:g} deg, speed "
+                   f"{lim.max_speed:g} deg/s"
+                   + (f", acceleration {lim.max_accel:g} deg/s^2" if lim.max_accel is not None else "")
+                   + ("; within them)" if check.ok else "; beyond them, written with --allow-fast)"))
 
 
 @command("predict", epilog="Example: hyst predict run_shift.csv --model shifted.json -o pred.csv")

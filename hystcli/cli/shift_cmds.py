@@ -1,7 +1,7 @@
 """`hyst detect-shift`: Algorithm 1 on a recorded replay (``--replay``) or a live robot (``--port``).
 
 Parses the options, opens one probe per knob (a :class:`hystcli.shift.ReplayProbe` over the
-replay, or ``hystcli.device.open_probe`` on the serial port), calls
+replay, or a ``hystcli.device.DeviceProbe`` per knob on one connection to the serial port), calls
 :func:`hystcli.shift.detect_shift` per knob, renders the offsets, and writes the shifted model
 (:func:`hystcli.shift.apply_shift`) atomically. Nothing is written unless every knob succeeded.
 """
@@ -21,14 +21,16 @@ from ..io import check_not_input, file_sha256, load_model, read_run, save_model
 from ..model import Model
 from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
                   command, echo_json, info)
+from .robot_opts import TimeoutOpt
 
 
 @contextlib.contextmanager
 def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
             baud: int, current_ceiling: float | None = None, speed: float | None = None,
-            dwell: float = device.DEFAULT_DWELL,
-            mean: float = device.DEFAULT_MEAN) -> Iterator[tuple[dict[int, Any], Any]]:
-    """Yield ``({knob: probe}, run or None)``; live probes are closed on the way out."""
+            dwell: float = device.DEFAULT_DWELL, mean: float = device.DEFAULT_MEAN,
+            timeout: float = 1.0) -> Iterator[tuple[dict[int, Any], Any]]:
+    """Yield ``({knob: probe}, run or None)``; live probes share one connection, closed (motors
+    stopped) on the way out."""
     if replay is not None:
         run = read_run(replay)
         if knobs is None:
@@ -43,14 +45,13 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
     knobs = list(model.knobs) if knobs is None else knobs
     for k in knobs:
         model.knob(k)
-    with contextlib.ExitStack() as stack:
-        probes = {}
-        for k in knobs:
-            probe = device.open_probe(port, baud, k, current_ceiling=current_ceiling, speed=speed,
-                                      dwell=dwell, mean=mean)
-            stack.callback(probe.device.close)
-            probes[k] = probe
-        yield probes, None
+    if baud <= 0:  # pyserial's own refusal would come out as a link error (exit 1)
+        raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
+    # one connection for every knob: one handshake, and no second open of a port that a
+    # device (or an OS) may hold exclusively
+    with device.Device(port, baud, timeout) as dev:
+        yield {k: device.DeviceProbe(dev, k, current_ceiling=current_ceiling, speed=speed,
+                                     dwell=dwell, mean=mean) for k in knobs}, None
 
 
 def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
@@ -93,6 +94,7 @@ def detect_shift_cmd(
         "--replay", help="Run CSV recorded under the new shape (columns t, q<k>, c<k>).")] = None,
     port: PortOpt = None,
     baud: BaudOpt = 115200,
+    timeout: TimeoutOpt = 1.0,
     knob: Annotated[Optional[int], typer.Option(
         "--knob", min=1, max=2, help="Search this knob only (default: every knob of the model the source has).")] = None,
     eps_lower: Annotated[Optional[float], typer.Option(
@@ -155,7 +157,8 @@ def detect_shift_cmd(
     options = dict(eps_lower=eps_lower, eps_upper=eps_upper, current_dead_zone=current_dead_zone,
                    step=step, max_steps=max_steps, max_travel=max_travel)
     results: dict[int, shift_mod.ShiftResult] = {}
-    with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window) as (probes, run):
+    with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window,
+                 timeout) as (probes, run):
         for k, probe in probes.items():
             progress = None
             if port is not None and not quiet:
