@@ -581,10 +581,19 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
                 stderr={k: _num(v, f"identification stderr {k}") for k, v in (d.get("stderr") or {}).items()},
                 **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
                    for name in KnobIdentification.OPTIONAL},
+                unfixed=_edge_names(d.get("unfixed"), source),
             )
         except KeyError as exc:
             raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
     return Model(knobs, geometry, tuple(effects), meta, ident)
+
+
+def _edge_names(value: object, source: str) -> tuple[str, ...]:
+    if value is None:
+        return ()
+    if not isinstance(value, list) or any(v not in ("d_pos", "d_neg") for v in value):
+        raise ModelError(f"{source}: identification \"unfixed\" must be a list of d_pos / d_neg")
+    return tuple(value)
 
 
 def model_to_dict(model: Model) -> dict:
@@ -604,7 +613,8 @@ def model_to_dict(model: Model) -> dict:
             str(k): {"slope_dead_zone": v.slope_dead_zone, "slope_loaded": v.slope_loaded,
                      "q_min": v.q_min, "q_max": v.q_max, "rmse": v.rmse, "stderr": dict(v.stderr),
                      **{name: getattr(v, name) for name in KnobIdentification.OPTIONAL
-                        if name == "current_dead_zone" or getattr(v, name) is not None}}
+                        if name == "current_dead_zone" or getattr(v, name) is not None},
+                     **({"unfixed": list(v.unfixed)} if v.unfixed else {})}
             for k, v in model.identification.items()}
     return out
 

@@ -507,6 +507,9 @@ class KnobIdentification:
     current_edge_pos, current_edge_neg : float or None
         Where the sweep's current showed a tendon taken up (deg of knob): the loading edges read
         the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
+    unfixed : tuple of str
+        Dead-zone edges the sweep could not place (``"d_pos"``, ``"d_neg"``): Algorithm 1 must
+        not take an offset from them.
     """
 
     slope_dead_zone: float
@@ -521,9 +524,11 @@ class KnobIdentification:
     no_load_falling: float | None = None
     current_edge_pos: float | None = None
     current_edge_neg: float | None = None
+    unfixed: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
+        object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
 
     OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
                 "current_edge_pos", "current_edge_neg")

@@ -274,7 +274,8 @@ def _ramp(n: int = 50, fs: float = 50.0, top: float = 10.0) -> dict:
     ("inf", "column 'q1', line 42: an infinite value"),
     ("t", "column 't' is not strictly increasing at line 32"),
     ("travel", "knob 1 reaches 175.0 deg at t=0.8 s, beyond the travel limit +-170 deg"),
-    ("huge", "knob 1 reaches 1e+308 deg at t=0.8 s, beyond the travel limit +-170 deg"),
+    # a value no knob could reach is refused when the file is read, before any limit is checked
+    ("huge", "column 'q1', line 42: 1e+308 is beyond +-1e+10"),
     ("speed", "knob 1 moves at 2010.2 deg/s at t=0.8 s, beyond the speed limit 360 deg/s"),
 ])
 def test_play_checks_the_whole_file_before_the_first_move(robot, tmp_path, case, words):

@@ -205,7 +205,7 @@ def test_load_model_predict_is_what_hyst_predict_writes(files, tmp_path):
 def test_model_compensate_is_what_hyst_compensate_writes(files, tmp_path):
     d = files
     res = CliRunner().invoke(app, ["compensate", str(d / "ref.csv"), "--model", str(d / "model.json"),
-                                   "-o", str(tmp_path / "cli.csv")])
+                                   "-o", str(tmp_path / "cli.csv"), "--allow-fast"])
     assert res.exit_code == 0, res.output
     m = hystcli.load_model(d / "model.json")
     hystcli.write_run(tmp_path / "api.csv", m.compensate(read_run(d / "ref.csv")).run)

@@ -214,6 +214,11 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                 f"{where_k}: the record cannot fix " + "; ".join(
                     f"{name} ({why})" for name, why in fit.unidentified.items()))
         model, stderr = fit.model, dict(fit.stderr)
+        for name, why in fit.sliding.items():
+            warnings.append(f"{where_k}: {name} is not fixed by this record ({why}); the model predicts the "
+                            f"tip, but Algorithm 1 will not use this edge")
+            stderr.pop(name, None)
+            stderr.pop("h_" + name[2:], None)
         if bootstrap > 0:
             sd = bootstrap_tip(fit, q, y, chk, bootstrap, np.random.default_rng(seed))
             stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS}
@@ -222,7 +227,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         if reading is not None:
             for side, name in (("pos", "d_pos"), ("neg", "d_neg")):
                 e = reading.edges.get(side)
-                if e is not None and abs(e - getattr(model, name)) > max(1.0, 3 * stderr[name]):
+                if e is not None and name in stderr and abs(e - getattr(model, name)) > max(1.0, 3 * stderr[name]):
                     warnings.append(f"{where_k}: the current shows the {'positive' if side == 'pos' else 'negative'} "
                                     f"tendon taken up at {e:.2f} deg, the tip's {name} is "
                                     f"{getattr(model, name):.2f} deg")
@@ -235,7 +240,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         method = "current"
     ident = None
     if c is not None:
-        ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr)
+        ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
+                        tuple(fit.sliding) if fit is not None else ())
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))
@@ -285,7 +291,7 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
 
 def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: TipFit | None,
             reading: CurrentReading | None, chk: SweepCheck, rmse: float | None,
-            stderr: Mapping[str, float]) -> KnobIdentification:
+            stderr: Mapping[str, float], unfixed: tuple[str, ...] = ()) -> KnobIdentification:
     """What Algorithm 1 needs of this knob's current, read where the model puts the tendons."""
     dq = np.gradient(q, t) if t.size > 1 else np.zeros_like(q)
     lo, hi = model.d_neg + 0.5, model.d_pos - 0.5
@@ -325,7 +331,7 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         rmse=rmse, stderr={k: v for k, v in stderr.items() if math.isfinite(v)}, current_dead_zone=c_dz,
         current_noise=noise, no_load_rising=no_rise, no_load_falling=no_fall,
         current_edge_pos=None if reading is None else reading.edges.get("pos"),
-        current_edge_neg=None if reading is None else reading.edges.get("neg"))
+        current_edge_neg=None if reading is None else reading.edges.get("neg"), unfixed=unfixed)
 
 
 def _dead_zone_slope(q: np.ndarray, c: np.ndarray, chk: SweepCheck, lo: float, hi: float) -> float:

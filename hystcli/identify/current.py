@@ -361,7 +361,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
     edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
     for side, d in (("pos", +1), ("neg", -1)):
-        ks = [s.edge for s in stretches if s.direction == d and s.edge is not None]
+        # stretches that came through the whole dead zone from a reversal first: the record's
+        # first stretch starts wherever the knob rested
+        ks = [s.edge for s in stretches if s.direction == d and s.edge is not None and s.from_reversal]
+        if not ks:
+            ks = [s.edge for s in stretches if s.direction == d and s.edge is not None]
         at = np.array([k.at for k in ks])
         off = np.abs(at - np.median(at)) > 1.0 if ks else np.zeros(0, bool)
         # stretches that disagree (more than a third of them over a degree off) show no edge one
@@ -375,12 +379,17 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size))
             levels[d] = float(np.median([k.level for k in ks]))
         # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
-        pl = [s.plateau for s in stretches if s.direction == -d and s.plateau is not None]
+        # complete branches (reversal to reversal) first: a stretch cut by the record's end is
+        # read on less travel
+        pl = [s.plateau for s in stretches[:-1] if s.direction == -d and s.plateau is not None]
+        if not pl:
+            pl = [s.plateau for s in stretches if s.direction == -d and s.plateau is not None]
         arr = np.array(pl)
-        # stretches that disagree (more than a third off the median by over a degree) show no
-        # backlash one can trust
-        if arr.size and np.sum(np.abs(arr - np.median(arr)) > 1.0) * 3 <= arr.size:
-            arr = arr[np.abs(arr - np.median(arr)) <= 1.0]
+        # stretches that disagree (more than a third off the median by over a degree, or 15 %)
+        # show no backlash one can trust
+        tol = max(1.0, 0.15 * abs(float(np.median(arr)))) if arr.size else 1.0
+        if arr.size and np.sum(np.abs(arr - np.median(arr)) > tol) * 3 <= arr.size:
+            arr = arr[np.abs(arr - np.median(arr)) <= tol]
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
             backlash_se["pos" if d > 0 else "neg"] = (float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size))
                                                       if arr.size > 1 else 0.25)

@@ -417,7 +417,10 @@ class TipFit:
     theta : numpy.ndarray
         The fitted theta vector (for predictions with its own initial state).
     unidentified : dict of str to str
-        Parameters the record cannot fix, each with the reason.
+        Parameters the record cannot fix, each with the reason: the prediction depends on them.
+    sliding : dict of str to str
+        Dead-zone edges the record cannot place (their flat is too narrow to see) although the
+        prediction hardly depends on where they are; each with the reason.
     n_samples : int
         Samples the local fit used.
     """
@@ -430,6 +433,7 @@ class TipFit:
     z_init: float
     theta: np.ndarray = field(repr=False)
     unidentified: dict[str, str] = field(default_factory=dict)
+    sliding: dict[str, str] = field(default_factory=dict)
     n_samples: int = 0
 
 
@@ -488,9 +492,9 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     rmse = float(np.sqrt(np.mean((model.forward(q, float(y[0])) - y) ** 2)))
     with threadpool_limits(limits=1):
         stderr, tau = _stderr(th, qf, yf, resid, noise)
-    unident = _unidentified(th, model, qf, stderr, span, noise)
+    unident, sliding = _unidentified(th, model, qf, stderr, span, noise)
     return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
-                  theta=th, unidentified=unident, n_samples=int(qf.size))
+                  theta=th, unidentified=unident, sliding=sliding, n_samples=int(qf.size))
 
 
 def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
@@ -523,9 +527,17 @@ def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
 
 
 def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[str, float],
-                  span: float, noise: float) -> dict[str, str]:
-    """Parameters the record cannot fix, with the physical reason (see the module docstring)."""
+                  span: float, noise: float) -> tuple[dict[str, str], dict[str, str]]:
+    """Parameters the record cannot fix, with the physical reason (see the module docstring).
+
+    Returns ``(unfixed, sliding)``: ``unfixed`` leaves the model's prediction itself undetermined
+    (a loaded stretch or a backlash the record never shows); ``sliding`` are dead-zone edges whose
+    flat is too narrow to see, so the edge (with its height) can slide along the loaded line
+    while the predicted tip moves by less than the step between the lines: the model predicts,
+    but the edge is no reference for Algorithm 1.
+    """
     out: dict[str, str] = {}
+    slides: dict[str, str] = {}
     g = _geometry(th)
     z = z_path(q, g, th[7])
     d_neg, d_pos, b_pos, b_neg, dh = g
@@ -554,7 +566,7 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         m = mask & (q >= lo_) & (q <= hi_)
         contrast = model.omega * (hi_ - lo_) * math.sqrt(m.sum()) / max(noise, 1e-12)
         if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST:
-            out[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
+            slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
                          f"sample(s) of the fitted loop, a step of {model.omega * (hi_ - lo_):.2f} deg of tip: too little "
                          "against the tracker's noise to place the edge apart from the "
                          "dead-zone height; sweep slower or sample faster")
@@ -568,15 +580,20 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         if stretch < min_stretch and name not in out:
             out[name] = (f"after the {side} reversal the tip never leaves its backlash plateau onto "
                          f"the unloading slope (needs a reversal beyond {need:.2f} deg); sweep further")
+    # the heights slide with an edge that slides (the same null direction)
+    with_slide = {"d_pos": ("h_pos",), "d_neg": ("h_neg",)}
+    excused = {h for e in slides for h in with_slide[e]} | set(slides)
+    if slides:
+        excused |= {"h_pos", "h_neg"}
     for name in PARAMS:
-        if name in out:
+        if name in out or name in excused:
             continue
         s = stderr.get(name, math.inf)
         limit = 0.25 * span if name not in ("omega",) else 0.5 * max(model.omega, 1e-3)
         if not math.isfinite(s) or s > limit:
             out[name] = (f"the record leaves it undetermined (one-sigma uncertainty "
                          f"{s:.3g}{'' if name == 'omega' else ' deg'})")
-    return out
+    return out, {k: v for k, v in slides.items() if k not in out}
 
 
 def bootstrap_tip(fit: TipFit, q: np.ndarray, y: np.ndarray, chk, n: int,
