@@ -29,10 +29,11 @@ from collections import defaultdict
 
 import numpy as np
 
+from hystcli import shift
 from hystcli.errors import HystError
-from hystcli.identify import identify, tip
+from hystcli.identify import current_levels, identify, tip
 from hystcli.io import parse_run
-from hystcli.model import KnobModel
+from hystcli.model import KnobModel, Model
 from hystcli.zoo import plants
 
 PARAMS = ("d_pos", "d_neg", "b_pos", "b_neg")
@@ -108,6 +109,94 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
           f"{100 * np.mean(cover):.1f} % of {len(cover)} parameters")
 
 
+def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> bool:
+    """Whether the replay has a monotone stretch that crosses a shifted edge by 2 deg either side
+    within the travel limit of its start: the denominator of the detection rate."""
+    tr, o = case.truth, case.offset
+    start = float(q[0])
+    dq = np.sign(np.diff(q))
+    cuts = np.flatnonzero(dq[1:] * dq[:-1] < 0) + 1
+    bounds = np.concatenate([[0], cuts, [q.size - 1]])
+    for edge, d in ((tr.d_pos + o, 1), (tr.d_neg + o, -1)):
+        if abs(edge - start) + 2.0 > travel:
+            continue
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            lo, hi = (q[a], q[b]) if d > 0 else (q[b], q[a])
+            if np.sign(q[b] - q[a]) == d and lo <= edge - 2.0 and hi >= edge + 2.0:
+                return True
+    return False
+
+
+def straight_model(case: plants.ReplayCase) -> tuple[Model, str]:
+    """The model a user would have: identified on the straight sweep (tip fit); when the sweep
+    cannot identify it, the true loop with the current levels read on that sweep."""
+    run = parse_run(case.straight_sweep.csv_text(), source="straight")
+    try:
+        return identify(run, use_tip=True).model, "identified"
+    except HystError:
+        tr = case.truth
+        km = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
+                       h_pos=tr.h_pos, h_neg=tr.h_neg)
+        return Model({1: km}, identification={1: current_levels(run, 1, km)}), "true loop"
+
+
+def bench_shift(n: int, seed: int) -> None:
+    stats: dict = defaultdict(lambda: defaultdict(int))
+    errs: list[float] = []
+    nulls: list[float] = []
+    silent: list[str] = []
+    t0 = time.perf_counter()
+    for s in range(seed, seed + n):
+        case = plants.replay_case(s)
+        fam = case.family
+        model, how = straight_model(case)
+        rep = parse_run(case.replay.csv_text(), source=f"replay-{s}")
+        travel = shift.default_max_travel(model, 1)
+        reach = edge_reachable(case, np.asarray(rep["q1"], float), travel)
+        key = "reach" if reach else "beyond"
+        try:
+            r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
+        except HystError:
+            stats[fam][f"refused ({key})"] += 1
+            continue
+        e = r.offset - case.offset
+        if case.offset == 0.0:
+            nulls.append(abs(r.offset))
+        if abs(e) <= 0.5:
+            stats[fam][f"ok ({key})"] += 1
+            errs.append(abs(e))
+        elif abs(e) <= 2.0:
+            stats[fam]["0.5-2 deg"] += 1
+            errs.append(abs(e))
+        else:
+            stats[fam]["silent > 2 deg"] += 1
+            silent.append(f"seed {s} ({fam}, {how}): offset {r.offset:+.2f}, true {case.offset:+.2f}")
+            errs.append(abs(e))
+    dt = time.perf_counter() - t0
+    cols = ("ok (reach)", "refused (reach)", "ok (beyond)", "refused (beyond)", "0.5-2 deg", "silent > 2 deg")
+    print(f"\ndetect-shift on replays, {n} zoo plants from seed {seed} (the straight model identified on "
+          f"the plant's straight sweep), {dt:.1f} s")
+    print("reach: the replay crosses a shifted edge within the travel limit; beyond: it does not")
+    print(f"{'family':18s} " + " ".join(f"{c:>16s}" for c in cols))
+    total: dict = defaultdict(int)
+    for fam in sorted(stats):
+        st = stats[fam]
+        for k, v in st.items():
+            total[k] += v
+        print(f"{fam:18s} " + " ".join(f"{st[c]:>16d}" for c in cols))
+    print(f"{'all':18s} " + " ".join(f"{total[c]:>16d}" for c in cols))
+    reach_n = total["ok (reach)"] + total["refused (reach)"] + sum(
+        1 for _ in ())  # off/silent are counted below with their own columns
+    print(f"within 0.5 deg: {total['ok (reach)']} of the {reach_n + total['0.5-2 deg'] + total['silent > 2 deg']} "
+          f"cases whose edge is reachable or that returned an offset; silent failures (exit 0, error > 2 deg): "
+          f"{total['silent > 2 deg']}; median |error| {np.median(errs) if errs else math.nan:.3f} deg, "
+          f"worst {max(errs) if errs else math.nan:.2f}")
+    if nulls:
+        print(f"null cases (no shift): {len(nulls)} returned, |offset| worst {max(nulls):.3f} deg")
+    for line in silent:
+        print("  silent: " + line)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=500)
@@ -117,6 +206,8 @@ def main(argv: list[str] | None = None) -> int:
     if args.only in (None, "identify"):
         bench_identify(args.n, args.seed, use_tip=True)
         bench_identify(args.n, args.seed, use_tip=False)
+    if args.only in (None, "shift"):
+        bench_shift(args.n, args.seed)
     return 0
 
 

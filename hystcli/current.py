@@ -20,8 +20,27 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+from numba import njit
 
 from .filters import lowpass
+
+N_PIECES = 5
+"""Straight pieces a stretch is split into (plateau, unloading, dead zone, loading, a wall or a
+stiffening cable)."""
+
+JUMP_RATIO = 0.6
+"""A piece counts as flatter than the next one when its slope is below this share of the next."""
+
+FLAT_AFTER = 0.35
+"""A later piece flatter than this share of the loaded slope (or than the piece before the jump,
+whichever is steeper, with a 20 % margin) is a dead zone still to come: the jump was a tendon
+unloading, or the end of a backlash plateau."""
+
+END_PIECE = 1.5
+"""A last piece shorter than this (deg) is the rounding of the reversal, not a feature."""
+
+MIN_CLARITY = 6.0
+"""A kink counts when its jump in slope exceeds this many standard errors."""
 
 DESPIKE_SAMPLES = 5
 """Width of the running median that takes out one-sample outliers before the low-pass."""
@@ -175,3 +194,143 @@ def _columns(dx: np.ndarray, curved: bool) -> list[np.ndarray]:
     if curved:
         cols.append(np.maximum(dx, 0.0) ** 2)
     return cols
+
+
+# --------------------------------------------------------------------------------------------
+# straight pieces and the loading edge
+# --------------------------------------------------------------------------------------------
+@njit(cache=True)
+def _segment_dp(x, v, nseg, minlen):
+    # Optimal split of (x, v) into nseg independent straight lines (least squares), by dynamic
+    # programming over prefix sums: exact, and cheap for the ~100-200 bins of one branch.
+    n = x.shape[0]
+    s0 = np.zeros(n + 1)
+    sx = np.zeros(n + 1)
+    sy = np.zeros(n + 1)
+    sxx = np.zeros(n + 1)
+    sxy = np.zeros(n + 1)
+    syy = np.zeros(n + 1)
+    for i in range(n):
+        s0[i + 1] = s0[i] + 1.0
+        sx[i + 1] = sx[i] + x[i]
+        sy[i + 1] = sy[i] + v[i]
+        sxx[i + 1] = sxx[i] + x[i] * x[i]
+        sxy[i + 1] = sxy[i] + x[i] * v[i]
+        syy[i + 1] = syy[i] + v[i] * v[i]
+    inf = 1e300
+    best = np.full((nseg + 1, n + 1), inf)
+    arg = np.zeros((nseg + 1, n + 1), dtype=np.int64)
+    best[0, 0] = 0.0
+    for k in range(1, nseg + 1):
+        for j in range(k * minlen, n + 1):
+            for i in range((k - 1) * minlen, j - minlen + 1):
+                if best[k - 1, i] >= inf:
+                    continue
+                m = s0[j] - s0[i]
+                ax = sx[j] - sx[i]
+                ay = sy[j] - sy[i]
+                cxx = sxx[j] - sxx[i] - ax * ax / m
+                cxy = sxy[j] - sxy[i] - ax * ay / m
+                cyy = syy[j] - syy[i] - ay * ay / m
+                sse = cyy - (cxy * cxy / cxx if cxx > 1e-12 else 0.0)
+                if sse < 0.0:
+                    sse = 0.0
+                total = best[k - 1, i] + sse
+                if total < best[k, j]:
+                    best[k, j] = total
+                    arg[k, j] = i
+    bounds = np.zeros(nseg + 1, dtype=np.int64)
+    bounds[nseg] = n
+    j = n
+    for k in range(nseg, 0, -1):
+        j = arg[k, j]
+        bounds[k - 1] = j
+    return bounds
+
+
+
+def pieces(x: np.ndarray, v: np.ndarray, minlen: int) -> list[tuple[int, int, float, float]]:
+    """Split binned points into straight pieces: ``(first, stop, slope, level at first)``."""
+    n = x.size
+    k = max(1, min(N_PIECES, n // max(minlen, 1)))
+    bounds = _segment_dp(np.ascontiguousarray(x), np.ascontiguousarray(v), k, minlen)
+    out = []
+    for a, b in zip(bounds[:-1], bounds[1:]):
+        xs, vs = x[a:b], v[a:b]
+        if b - a >= 2 and np.ptp(xs) > 0:
+            m, c0 = np.polyfit(xs, vs, 1)
+        else:
+            m, c0 = 0.0, float(vs.mean())
+        out.append((int(a), int(b), float(m), float(c0 + m * xs[0])))
+    return out
+
+
+def edge_piece(pieces, slopes, xb, sig) -> int | None:
+    """Index of the flat piece that the loading edge ends (see the module docstring)."""
+    n = len(pieces)
+    if n < 2:
+        return None
+    # the stretch must end loaded: its last piece rises clearly (or the one before a short last
+    # piece, the reversal's rounding)
+    def rises(k: int) -> bool:
+        p = pieces[k]
+        return slopes[k] > 0 and slopes[k] * (xb[p[1] - 1] - xb[p[0]] + 1e-9) > 6 * sig
+
+    short_last = xb[pieces[-1][1] - 1] - xb[pieces[-1][0]] < END_PIECE
+    if not (rises(n - 1) or (short_last and n > 1 and rises(n - 2))):
+        return None
+    best, best_pre = None, math.inf
+    for j in range(n - 1):
+        pre, post = slopes[j], slopes[j + 1]
+        if post <= 0 or pre > JUMP_RATIO * post:
+            continue
+        length = xb[pieces[j + 1][1] - 1] - xb[pieces[j + 1][0]] + 1e-9
+        if (post - pre) * length < 6 * sig:
+            continue
+        # nothing flat after it (a dead zone still to come means this was a tendon unloading);
+        # a short last piece is the reversal's rounding, not a dead zone
+        later = [k for k in range(j + 2, n)
+                 if not (k == n - 1 and xb[pieces[k][1] - 1] - xb[pieces[k][0]] < END_PIECE)]
+        floor = 1.2 * max(pre, FLAT_AFTER * post)
+        if any(slopes[k] <= floor for k in later):
+            continue
+        if pre <= best_pre:   # the flattest start; of equals the later one (the far side)
+            best, best_pre = j, pre
+    return best
+
+
+def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
+                 resolution: float | None = None) -> Kink | None:
+    """Where a tendon is taken up on one monotone stretch, or None when it shows no such kink.
+
+    ``q, c`` are points along the motion (binned samples, or a stepping search's readings);
+    ``sig`` the noise of one point. The stretch is split into straight pieces; the loading edge
+    is the jump in slope (dC/dq, loading-positive) out of the flattest piece after which nothing
+    flat follows (:func:`edge_piece`), placed by :func:`kink_fit` on the flat piece and the
+    loaded run up to a wall. Kinks clearer than :data:`MIN_CLARITY` standard errors only.
+    """
+    q = np.asarray(q, float)
+    c = np.asarray(c, float)
+    d = direction
+    x = d * (q - q[0])
+    if x.size < 2 * minlen + 1:
+        return None
+    pcs = pieces(x, c, minlen)
+    slopes = [d * m for (_, _, m, _) in pcs]
+    j = edge_piece(pcs, slopes, x, sig)
+    if j is None:
+        return None
+    a0 = pcs[j][0]
+    # the kink fit sees the flat piece and the loaded run up to a wall (the next qualifying jump)
+    stop = x.size
+    for jj in range(j + 2, len(pcs)):
+        if slopes[jj - 1] <= JUMP_RATIO * slopes[jj] and (slopes[jj] - slopes[jj - 1]) * (
+                x[pcs[jj][1] - 1] - x[pcs[jj][0]]) > 6 * sig:
+            stop = pcs[jj][0]
+            break
+    lo_b, hi_b = pcs[j][0], pcs[j + 1][1] - 1
+    kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
+                    curved=True, min_side=max(2, minlen // 2), resolution=resolution)
+    if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
+        return None
+    return kink

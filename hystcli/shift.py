@@ -2,34 +2,39 @@
 
 This module owns the search for the shifted dead zone :math:`\\tilde D_{pos}, \\tilde D_{neg}`
 of one knob after the shaft took an unknown shape (paper section II-C, Algorithm 1 and the
-Discussion; DESIGN.md section 5): step the knob by ``direction * u``, watch the slope of the
-motor current :math:`\\nabla C = dC/dq`, reverse on a contact (:math:`\\nabla C \\ge
-\\epsilon_{upper}`), stop at the first dead-zone edge (:math:`\\nabla C \\ge \\epsilon_{lower}`),
-and report ``offset = q - D_pos`` (moving positive) or ``q - D_neg`` (moving negative).
+Discussion; DESIGN.md section 5): step the knob by ``direction * u``, read the motor current,
+stop where a tendon is taken up (the slope :math:`\\nabla C = dC/dq` jumps from the dead zone's
+to a loaded one, :math:`\\ge \\epsilon_{lower}`), reverse on a contact (:math:`\\ge
+\\epsilon_{upper}`), and report ``offset = edge - D_pos`` (moving positive) or ``edge - D_neg``
+(moving negative).
 
 One algorithm, several sources. The algorithm talks to a :class:`Probe` (step the knob, read the
 current); :class:`ReplayProbe` walks a recorded run, ``hystcli.device.DeviceProbe`` drives a
-live robot over a serial port. Both return :class:`ProbeSample`.
+live robot over a serial port. Both return :class:`ProbeSample`, and both go through the same
+decisions.
 
-Beyond the paper's pseudo-code, the search:
+The decisions read the current's **level** as well as its slope (DESIGN.md section 4), because a
+real current is not one law:
 
-* measures the slope over a small window of recent steps (least squares), reset at every
-  direction change so that the Coulomb-friction jump of the motor at a reversal is never read
-  as an edge;
-* locates the edge it stopped at by fitting a hinge (flat then sloped, or sloped then flat) to
-  the steps around it, so the reported edge is where the slope changes, not where the window's
-  slope happened to cross the threshold (the window delays a threshold crossing by about half
-  its width; the hinge fit removes that delay and the symmetric smoothing of the 20 Hz filter);
-* handles a start outside the new dead zone (a tendon already taut at the first steps): it
-  tells which tendon from the current level against the dead-zone level ``current_dead_zone``
-  (the motor current is signed: above the level, the positive tendon pulls), moves toward the
-  dead zone and takes the edge where the slope falls below :math:`\\epsilon_{lower}`;
-* never exceeds its step and travel limits (raises :class:`ShiftDetectionError` rather than
-  inventing an offset) and, on any failure or interruption, stops the probe and returns the
-  knob to where it began.
-
-The motor current is signed (see ``hystcli.twin``): past either edge ``dC/dq > 0`` whichever
-way the knob moves, so the slope along the motion is ``dC/dq`` with ``dq`` signed.
+* **where the search starts.** The first readings' level against the no-load level the
+  identification measured tells the state: within the margin, no tendon is taut and the search
+  goes its way; above it the positive tendon is taut (the motor current is signed), below it the
+  negative one, and the search turns toward and *through* the dead zone. A current that moves back
+  toward its no-load level is a tendon unloading, never an edge: after a backlash plateau it
+  unloads wherever that plateau ends, which depends on the history, so no offset is taken there.
+  A start in the dead zone whose current turns out to be loading from the first steps turns round
+  the same way.
+* **what an edge is.** On the readings since the last reversal, the loading edge is a jump in
+  slope out of a flat (or pretensioned, gently sloped) stretch after which nothing flat follows
+  (:func:`hystcli.current.loading_edge`, the reading identification uses too), placed by a
+  two-line fit, so neither a window's delay nor a filter's rounding moves it.
+* **whether to believe it.** Every offset carries its evidence (:class:`Evidence`): how clear
+  the kink is (jump in slope over its standard error), the fit's residual against the readings'
+  own noise, the current level at the kink against the no-load level, the slopes either side.
+  When it is weak, the search refuses with the reason (:class:`ShiftDetectionError`, exit 1)
+  rather than return an offset: a wrong offset makes compensation worse than none.
+* it never exceeds its step and travel limits and, on any failure or interruption, stops the
+  probe and returns the knob to where it began.
 """
 from __future__ import annotations
 
@@ -45,11 +50,17 @@ from .errors import DataError, HystError, ShiftDetectionError
 from .io import Run, atomic_write
 from .model import KnobModel, Model
 
-LOCAL_SPAN = 4.0  # steps kept on the loaded side of a kink when refitting it (see _Search._fit)
 RISE = "rise"
-"""The slope rose through eps_lower: the knob left the dead zone (the paper's case)."""
-FALL = "fall"
-"""The slope fell below eps_lower: the knob entered the dead zone (a start outside it)."""
+"""The slope rose through eps_lower out of the dead zone: a tendon taken up (every offset's edge)."""
+
+MIN_CLARITY = 8.0
+"""Fewest standard errors the jump in slope at an accepted edge must stand above zero."""
+
+MAX_RESIDUAL = 4.0
+"""Largest RMS of the two-line fit at an accepted edge, in units of the readings' own noise."""
+
+AFTER_STEPS = 4
+"""Readings past a kink (and at least 1.5 deg of travel) before it is judged."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -236,22 +247,33 @@ class ReplayProbe:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Thresholds:
-    """The gradient bounds of Algorithm 1 for one knob, and the dead-zone current level.
+    """What the search needs of one knob's current: the gradient bounds and the no-load level.
 
     Attributes
     ----------
     eps_lower : float
-        :math:`\\epsilon_{lower}` (mA/deg): a slope at or above it means a tendon is taut.
+        :math:`\\epsilon_{lower}` (mA/deg): a loaded slope is at least this.
     eps_upper : float
         :math:`\\epsilon_{upper}` (mA/deg): a slope at or above it means contact with a wall.
     current_dead_zone : float or None
-        Motor current with no tendon taut (mA), to tell which tendon is taut at a start
-        outside the dead zone.
+        Motor current with no tendon taut (mA): which tendon is taut at the start.
+    no_load_spread : float
+        Half the gap between the no-load currents while rising and while falling (the motor's
+        Coulomb friction), mA: a reading at rest lies anywhere within it.
+    unfixed : tuple of str
+        Edges the identification could not place (``d_pos``/``d_neg``): no offset from them.
     """
 
     eps_lower: float
     eps_upper: float
     current_dead_zone: float | None = None
+    no_load_spread: float = 0.0
+    unfixed: tuple[str, ...] = ()
+
+    @property
+    def slope_loaded(self) -> float:
+        """The loaded slope the thresholds were made from (eps_upper is five times it)."""
+        return self.eps_upper / 5.0
 
 
 def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
@@ -285,13 +307,59 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
                                   f"(got eps_lower = {eps_lower:g}, eps_upper = {eps_upper:g})")
     if current_dead_zone is not None and not math.isfinite(current_dead_zone):
         raise ShiftDetectionError(f"current_dead_zone must be finite, got {current_dead_zone}")
+    spread = 0.0
+    unfixed: tuple[str, ...] = ()
+    if ident is not None:
+        if ident.no_load_rising is not None and ident.no_load_falling is not None:
+            spread = 0.5 * abs(ident.no_load_rising - ident.no_load_falling)
+        unfixed = tuple(ident.unfixed)
     return Thresholds(float(eps_lower), float(eps_upper),
-                      None if current_dead_zone is None else float(current_dead_zone))
+                      None if current_dead_zone is None else float(current_dead_zone), spread, unfixed)
 
 
 # --------------------------------------------------------------------------------------------
 # result
 # --------------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class Evidence:
+    """Why an offset was believed: the kink it came from.
+
+    Attributes
+    ----------
+    clarity : float
+        Jump in slope at the kink over its standard error.
+    edge_se : float
+        Standard error of the kink's position (deg).
+    residual : float
+        RMS of the two-line fit (mA).
+    noise : float
+        Noise of one reading, from the readings themselves (mA).
+    level : float
+        Current at the kink (mA), where the tendon was taken up.
+    no_load : float or None
+        The no-load current the identification measured (mA).
+    slope_before, slope_after : float
+        dC/dq either side of the kink, loading-positive (mA/deg).
+    n_before, n_after : int
+        Readings either side.
+    """
+
+    clarity: float
+    edge_se: float
+    residual: float
+    noise: float
+    level: float
+    no_load: float | None
+    slope_before: float
+    slope_after: float
+    n_before: int
+    n_after: int
+
+    def to_dict(self) -> dict:
+        return {k: getattr(self, k) for k in ("clarity", "edge_se", "residual", "noise", "level", "no_load",
+                                              "slope_before", "slope_after", "n_before", "n_after")}
+
+
 @dataclass(frozen=True)
 class ShiftResult:
     """What Algorithm 1 found for one knob.
@@ -306,12 +374,11 @@ class ShiftResult:
     edge : str
         Which edge was found: ``"pos"`` (:math:`\\tilde D_{pos}`) or ``"neg"``.
     edge_found_at : float
-        Knob angle of that edge (deg), from the hinge fit.
+        Knob angle of that edge (deg), from the two-line fit.
     direction : int
         Direction of motion when it was found (+1 or -1).
     transition : str
-        ``"rise"`` (left the dead zone, the paper's case) or ``"fall"`` (entered it from a start
-        outside).
+        ``"rise"``: a tendon taken up out of the dead zone (the only edge an offset comes from).
     start : float
         Knob angle where the search began and where the knob was returned (deg).
     travel : float
@@ -321,14 +388,16 @@ class ShiftResult:
     contacts : tuple of float
         Knob angles where a contact made the search reverse.
     start_outside : bool
-        The search began with a tendon already taut.
+        The search began with a tendon already taut (and turned through the dead zone).
     returned : bool
         The knob was returned to ``start`` after the search.
     eps_lower, eps_upper, step : float
         The thresholds (mA/deg) and unit step (deg) used.
+    evidence : Evidence or None
+        The kink the offset came from.
     trace : tuple of (q, current, slope)
-        Every step: knob angle (deg), current (mA), window slope (mA/deg, NaN before the window
-        is full), for plotting (the paper's Fig. 5b).
+        Every step: knob angle (deg), current (mA), slope of the last readings (mA/deg, NaN
+        before there are three), for plotting (the paper's Fig. 5b).
     """
 
     knob: int
@@ -348,6 +417,7 @@ class ShiftResult:
     eps_lower: float = math.nan
     eps_upper: float = math.nan
     step: float = math.nan
+    evidence: Evidence | None = None
     trace: tuple[tuple[float, float, float], ...] = field(default=(), repr=False)
 
     def to_dict(self, trace: bool = False) -> dict:
@@ -359,6 +429,7 @@ class ShiftResult:
             "steps": self.steps, "contacts": list(self.contacts),
             "start_outside": self.start_outside, "returned": self.returned,
             "eps_lower": self.eps_lower, "eps_upper": self.eps_upper, "step": self.step,
+            "evidence": None if self.evidence is None else self.evidence.to_dict(),
         }
         if trace:
             out["trace"] = [[q, c, None if math.isnan(s) else s] for q, c, s in self.trace]
@@ -366,7 +437,7 @@ class ShiftResult:
 
 
 # --------------------------------------------------------------------------------------------
-# helpers of the search
+# the search
 # --------------------------------------------------------------------------------------------
 def _ls_slope(q: np.ndarray, c: np.ndarray) -> float:
     """Least-squares slope dC/dq."""
@@ -375,48 +446,13 @@ def _ls_slope(q: np.ndarray, c: np.ndarray) -> float:
     return float(qm @ (c - c.mean()) / den) if den > 0 else math.nan
 
 
-_MIN_SIDE = 3  # samples on each side of a kink: two points always make a line, three may not
-_MAX_EXTENSIONS = 3  # times a fit may ask for more steps past a kink it found at the last ones
-
-
-@dataclass(frozen=True)
-class _Hinge:
-    edge: float      # knob angle of the kink (deg)
-    before: float    # dC/dq before the kink along the motion
-    after: float     # dC/dq after it
-    at_end: bool = False  # the kink sits at the last place the fit allows: too few steps after it
-
-
-def _hinge_fit(q: np.ndarray, c: np.ndarray, direction: int, resolution: float) -> _Hinge | None:
-    """Best two-piece continuous line through ``(q, c)`` taken in the order of the motion.
-
-    The kink is searched on a grid of ``resolution`` deg with at least ``_MIN_SIDE`` samples on either
-    side; the two slopes and the level are linear least squares at each candidate.
-    """
-    x = direction * np.asarray(q, float)
-    c = np.asarray(c, float)
-    if x.size < 2 * _MIN_SIDE:
-        return None
-    lo, hi = x[_MIN_SIDE - 1], x[-_MIN_SIDE]
-    if not hi > lo:
-        return None
-    grid = np.arange(lo, hi + 0.5 * resolution, resolution)
-    # design matrices of every candidate at once: (G, n, 3)
-    dx = x[None, :] - grid[:, None]
-    a = np.stack([np.ones_like(dx), np.minimum(dx, 0.0), np.maximum(dx, 0.0)], axis=-1)
-    ata = np.einsum("gni,gnj->gij", a, a)
-    atc = np.einsum("gni,n->gi", a, c)
-    ok = np.abs(np.linalg.det(ata)) > 1e-12
-    if not ok.any():
-        return None
-    beta = np.zeros((grid.size, 3))
-    beta[ok] = np.linalg.solve(ata[ok], atc[ok][..., None])[..., 0]
-    resid = c[None, :] - np.einsum("gni,gi->gn", a, beta)
-    sse = np.where(ok, np.einsum("gn,gn->g", resid, resid), np.inf)
-    g = int(np.argmin(sse))
-    # slopes along x are dC/dx; dC/dq = direction * dC/dx
-    return _Hinge(edge=float(direction * grid[g]), before=float(direction * beta[g, 1]),
-                  after=float(direction * beta[g, 2]), at_end=g == grid.size - 1)
+def _reading_noise(c: np.ndarray) -> float:
+    """Noise of one reading from the readings themselves: robust spread of second differences
+    (a straight line has none; a kink moves one of them, which the median ignores)."""
+    if c.size < 5:
+        return math.nan
+    d2 = np.diff(c, 2)
+    return float(1.4826 * np.median(np.abs(d2 - np.median(d2))) / math.sqrt(6.0))
 
 
 class _LimitReached(Exception):
@@ -425,30 +461,17 @@ class _LimitReached(Exception):
         self.why = why
 
 
-class _Found(Exception):
-    def __init__(self, hinge: _Hinge, transition: str) -> None:
-        super().__init__(transition)
-        self.hinge = hinge
-        self.transition = transition
-
-
-# search phases
-_SEEK_RISE = "seek-rise"          # in the dead zone, moving toward an edge
-_SEEK_FALL = "seek-fall"          # a tendon taut since the start, moving toward the dead zone
-_LEAVE_CONTACT = "leave-contact"  # backing away from a wall toward the dead zone
-
-
 class _Search:
     """The state of one run of Algorithm 1 (see :func:`detect_shift`)."""
 
+    FIRST = 3        # readings that classify the start
+    LOADED_CHECK = 6  # readings after which a start that is loading all along turns round
+
     def __init__(self, probe: Any, knob: int, th: Thresholds, step: float, max_steps: int,
-                 max_travel: float, window: int, confirm_steps: int, direction: int,
-                 level_margin: float, progress: Callable[[ProbeSample, float], None] | None) -> None:
+                 max_travel: float, direction: int, level_margin: float,
+                 progress: Callable[[ProbeSample, float], None] | None) -> None:
         self.probe, self.knob, self.th = probe, knob, th
         self.u, self.max_steps, self.max_travel = step, max_steps, max_travel
-        self.window, self.confirm = window, confirm_steps
-        self.fit_len = 3 * window
-        self.local_span = LOCAL_SPAN
         self.dir = direction
         self.margin = level_margin
         self.progress = progress
@@ -458,17 +481,14 @@ class _Search:
         self.travel = 0.0
         self.seg_q: list[float] = []
         self.seg_c: list[float] = []
-        self.seg_from_start = True   # the present segment began where the search began
-        self.phase = _SEEK_RISE
+        self.seg_from_start = True
         self.contacts: list[float] = []
         self.start_outside = False
-        self.ambiguous = False       # the start's current level did not say which tendon is taut
-        self.first_window_trigger = False
+        self.pending_refusal: str | None = None
         self.trace: list[tuple[float, float, float]] = []
 
     # -- moving -------------------------------------------------------------------------------
-    def _step(self) -> tuple[float, float]:
-        """One unit step; returns (window slope, step slope) of the present segment."""
+    def _step(self) -> None:
         if self.travel + self.u > self.max_travel + 1e-9:
             raise _LimitReached(f"the travel limit is {self.max_travel:g} deg")
         if self.steps >= self.max_steps:
@@ -487,194 +507,110 @@ class _Search:
                                       f"(q = {s.q!r}, current = {s.current!r}) at {target:.2f} deg")
         self.seg_q.append(qs)
         self.seg_c.append(cs)
-        n = len(self.seg_q)
         w = math.nan
-        if n >= self.window:
-            w = _ls_slope(np.array(self.seg_q[-self.window:]), np.array(self.seg_c[-self.window:]))
-        step_slope = math.nan
-        if n >= 2 and self.seg_q[-1] != self.seg_q[-2]:
-            step_slope = (self.seg_c[-1] - self.seg_c[-2]) / (self.seg_q[-1] - self.seg_q[-2])
+        if len(self.seg_q) >= 3:
+            w = _ls_slope(np.array(self.seg_q[-4:]), np.array(self.seg_c[-4:]))
         self.trace.append((qs, cs, w))
         if self.progress is not None:
             self.progress(s, w)
-        return w, step_slope
 
     def _reverse(self) -> None:
-        # a new segment: the motor's Coulomb friction jumps at a reversal, and no slope may span it
+        # a new segment: the motor's Coulomb friction jumps at a reversal, and no fit may span it
         self.dir = -self.dir
         self.seg_q, self.seg_c = [], []
         self.seg_from_start = False
 
-    def _contact(self) -> None:
-        self.contacts.append(self.q)
-        if len(self.contacts) > 1:
-            raise ShiftDetectionError(
-                f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
-                f"{self.contacts[1]:.2f} deg): no free side to find a dead-zone edge")
-        self._reverse()
-        self.phase = _LEAVE_CONTACT
+    # -- the level ----------------------------------------------------------------------------
+    def _taut_side(self, level: float) -> int:
+        """+1 (positive tendon), -1 (negative) or 0 (none) from a current level."""
+        c0 = self.th.current_dead_zone
+        if c0 is None:
+            return 0
+        off = level - c0
+        if abs(off) <= self.margin:
+            return 0
+        return 1 if off > 0 else -1
 
-    def _fit(self) -> _Hinge | None:
-        q = np.array(self.seg_q[-self.fit_len:])
-        c = np.array(self.seg_c[-self.fit_len:])
-        h = _hinge_fit(q, c, self.dir, resolution=self.u / 25.0)
-        if h is None or h.at_end or self.local_span is None:
-            return h
-        # Refit with the loaded side cut to the steps near the kink: the dead-zone side is flat
-        # (no tendon taut) and every step of it helps, but the loaded side bends while the sheath
-        # friction builds up after a start or a reversal, and a bent piece pulls the kink.
-        for _ in range(3):  # recentre: each refit moves the kink, and with it the cut
-            x = self.dir * (q - h.edge)
-            loaded_side = x > 0 if h.after >= h.before else x < 0
-            keep = ~loaded_side | (np.abs(x) <= self.local_span * self.u)
-            if keep.sum() < 2 * _MIN_SIDE or keep.all():
-                break
-            h2 = _hinge_fit(q[keep], c[keep], self.dir, resolution=self.u / 25.0)
-            if h2 is None:
-                break
-            moved = abs(h2.edge - h.edge)
-            h = h2
-            if moved < 1e-9:
-                break
-        return h
-
-    # -- deciding -----------------------------------------------------------------------------
-    def _start_outside(self) -> None:
-        """A tendon is taut from the first steps: turn toward the dead zone."""
-        cdz = self.th.current_dead_zone
-        if cdz is None:
-            raise ShiftDetectionError(
-                f"knob {self.knob} is loaded from the first steps (a tendon is already taut at "
-                f"{self.start:g} deg) and the model has no dead-zone current level to tell which "
-                "one: give --current-dead-zone (or identify the model with `hyst identify`)")
-        level = float(np.mean(self.seg_c[:self.window]))
-        taut_side = 1 if level > cdz else -1          # signed current: above the level, + pulls
-        self.ambiguous = abs(level - cdz) < self.margin
+    def _turn_toward_slack(self, side: int) -> None:
+        """A tendon is taut: head for the dead zone and through it to the other edge."""
         self.start_outside = True
-        self.phase = _SEEK_FALL
-        if -taut_side != self.dir:
+        if self.dir == side:
             self._reverse()
 
-    def _level_says_taut(self) -> bool:
-        cdz = self.th.current_dead_zone
-        return cdz is not None and abs(float(np.mean(self.seg_c[:self.window])) - cdz) >= self.margin
+    # -- deciding -----------------------------------------------------------------------------
+    def _judge(self, kink) -> tuple[bool, str]:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether a loading kink is an edge to take an offset from, or why not."""
+        n_after = kink.n_after
+        span_after = self.dir * (self.seg_q[-1] - kink.at)
+        if n_after < AFTER_STEPS or span_after < max(1.5, 3 * self.u):
+            return False, ""
+        noise = _reading_noise(np.array(self.seg_c))
+        if kink.clarity < MIN_CLARITY:
+            return False, (f"the kink at {kink.at:.2f} deg is unclear: its jump in slope is "
+                           f"{kink.clarity:.1f} standard errors (needs {MIN_CLARITY:g})")
+        if math.isfinite(noise) and noise > 0 and kink.residual > MAX_RESIDUAL * noise:
+            return False, (f"the current around {kink.at:.2f} deg is not two straight lines (fit residual "
+                           f"{kink.residual:.3g} mA, {kink.residual / noise:.1f} times the readings' noise)")
+        if kink.after < 0.5 * self.th.eps_lower:
+            return False, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
+                           f"below a taut tendon's ({self.th.eps_lower:.3g})")
+        side = self._taut_side(kink.level)
+        if side != 0:
+            # the flat before the kink sits on a loaded level: a plateau of a taut tendon, not
+            # the dead zone; a real edge, if any, comes later
+            return False, (f"the kink at {kink.at:.2f} deg starts from {kink.level:.1f} mA, off the no-load "
+                           f"level {self.th.current_dead_zone:.1f} mA: a taut tendon's plateau, not the dead zone")
+        return True, ""
 
-    def _wrong_way(self) -> bool:
-        """An ambiguous start turned the wrong way: the current left the dead-zone level."""
-        cdz = self.th.current_dead_zone
-        if not self.ambiguous or cdz is None or len(self.seg_c) < 2:
-            return False
-        level = 0.5 * (self.seg_c[-1] + self.seg_c[-2])
-        return self.dir * (level - cdz) > self.margin
+    def run(self):  # noqa: ANN201 - (Kink, direction)
+        from .current import loading_edge
 
-    def _evaluate(self) -> bool:
-        """After a trigger and its confirming steps: classify the kink by a hinge fit.
-
-        Returns True when the fit needs more steps (the kink is at the end of the steps).
-        """
-        eps = self.th.eps_lower
-        h = self._fit()
-        if h is None:
-            return False
-        n_after = int(np.sum(self.dir * (np.array(self.seg_q) - h.edge) > 0))
-        if h.at_end or n_after < max(self.confirm, _MIN_SIDE):
-            # too few steps past the kink to place it: take more before deciding
-            return True
-        rise = h.before < eps <= h.after
-        fall = h.before >= eps > h.after
-        loaded = h.before >= eps and h.after >= eps
-        flat = h.before < eps and h.after < eps
-        if self.phase == _SEEK_RISE:
-            if h.after >= self.th.eps_upper:
-                self._contact()
-            elif rise:
-                raise _Found(h, RISE)
-            elif fall and self.first_window_trigger:
-                # the first window was loaded and the slope has fallen since: the search began
-                # with a tendon taut and has already entered the dead zone
-                self.start_outside = True
-                raise _Found(h, FALL)
-            elif loaded and self.first_window_trigger:
-                self._start_outside()
-        elif self.phase == _SEEK_FALL:
-            if fall:
-                raise _Found(h, FALL)
-            if flat:
-                # already inside the dead zone (the fall came before the window filled):
-                # go on to the far edge
-                self._restart_segment_at(None)
-                self.phase = _SEEK_RISE
-        elif self.phase == _LEAVE_CONTACT:
-            if fall or flat:
-                # off the wall and back in the dead zone: search the other edge (paper, Discussion)
-                self._restart_segment_at(h.edge if fall else None)
-                self.phase = _SEEK_RISE
-
-    def _restart_segment_at(self, edge: float | None) -> None:
-        q, c = np.array(self.seg_q), np.array(self.seg_c)
-        keep = (self.dir * (q - edge) > 0) if edge is not None else np.arange(q.size) >= q.size - self.window
-        self.seg_q, self.seg_c = list(q[keep]), list(c[keep])
-        self.seg_from_start = False
-
-    def _triggered(self, w: float) -> bool:
-        if math.isnan(w):
-            return False
-        if self.phase == _SEEK_RISE:
-            return w >= self.th.eps_lower
-        return w < self.th.eps_lower
-
-    # -- the loop -----------------------------------------------------------------------------
-    def run(self) -> tuple[_Hinge, str]:
-        pending = 0
-        extensions = 0
-        while True:
-            try:
-                w, step_slope = self._step()
-            except _LimitReached as lim:
-                if pending:
-                    try:
-                        self._evaluate()
-                    except _Found as f:
-                        return f.hinge, f.transition
-                raise ShiftDetectionError(
-                    f"knob {self.knob}: no edge found within {self.steps} steps / "
-                    f"{self.travel:.1f} deg of knob travel ({lim.why})") from None
-            try:
-                if self.phase != _LEAVE_CONTACT and step_slope >= self.th.eps_upper:
-                    self._contact()
-                    pending = 0
-                    continue
-                if self.phase == _SEEK_FALL and self._wrong_way():
-                    self.ambiguous = False
+        try:
+            for _ in range(self.FIRST):
+                self._step()
+            side = self._taut_side(float(np.median(self.seg_c)))
+            if side != 0:
+                self._turn_toward_slack(side)
+            while True:
+                self._step()
+                n = len(self.seg_q)
+                q, c = np.array(self.seg_q), np.array(self.seg_c)
+                # contact: the last readings climb far steeper than any tendon
+                if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
+                        (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper):
+                    self.contacts.append(self.q)
+                    if len(self.contacts) > 1:
+                        raise ShiftDetectionError(
+                            f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
+                            f"{self.contacts[1]:.2f} deg): no free side to find a dead-zone edge")
                     self._reverse()
-                    pending = 0
                     continue
-                if pending:
-                    pending -= 1
-                    if pending == 0 and self._evaluate() and extensions < _MAX_EXTENSIONS:
-                        extensions += 1
-                        pending = _MIN_SIDE - 1
+                # a start in the dead zone that has been loading all along: a tendon was taut
+                if (self.seg_from_start and not self.start_outside and n == self.LOADED_CHECK
+                        and _ls_slope(q, c) >= self.th.eps_lower):
+                    side = self._taut_side(float(c[-1]))
+                    if side == self.dir:
+                        self._turn_toward_slack(side)
+                        continue
+                if n < 8:
                     continue
-                if (self.phase == _SEEK_RISE and self.seg_from_start and len(self.seg_q) == self.window
-                        and w >= self.th.eps_lower and self._level_says_taut()):
-                    # loaded from the first steps and the current level is clearly off the
-                    # dead-zone level: a tendon is taut, no need to confirm before turning
-                    self._start_outside()
+                sig = _reading_noise(c)
+                sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
+                kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
+                if kink is None:
                     continue
-                if self._triggered(w):
-                    # the first full window already loaded: a tendon may be taut since the start
-                    self.first_window_trigger = self.seg_from_start and len(self.seg_q) == self.window
-                    # entering the dead zone loads nothing: confirm a fall (possible after a
-                    # first loaded window too) over more steps
-                    pending = self.confirm
-                    if self.phase != _SEEK_RISE or self.first_window_trigger:
-                        pending += 2
-                    extensions = 0
-                    if pending == 0 and self._evaluate():
-                        pending = _MIN_SIDE - 1
-                        extensions = 1
-            except _Found as f:
-                return f.hinge, f.transition
+                ok, why = self._judge(kink)
+                if ok:
+                    return kink
+                if why:
+                    self.pending_refusal = why
+        except _LimitReached as lim:
+            why = f"; the last candidate was refused: {self.pending_refusal}" if self.pending_refusal else ""
+            where = (" (it started with a tendon taut and went through the dead zone toward the other edge)"
+                     if self.start_outside else "")
+            raise ShiftDetectionError(
+                f"knob {self.knob}: no edge found within {self.steps} steps / {self.travel:.1f} deg of knob "
+                f"travel ({lim.why}){where}{why}") from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -722,10 +658,9 @@ def default_max_travel(model: Model, knob: int) -> float:
 def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | None = None,
                  eps_upper: float | None = None, current_dead_zone: float | None = None,
                  step: float = 0.5, max_steps: int | None = None, max_travel: float | None = None,
-                 window: int = 6, confirm_steps: int = 4, direction: int = 1,
-                 level_margin: float | None = None, return_home: bool = True,
+                 direction: int = 1, level_margin: float | None = None, return_home: bool = True,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
-    """Find the shift of one knob's dead zone by the slope of its motor current (Algorithm 1).
+    """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
     Parameters
     ----------
@@ -739,8 +674,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         :math:`\\epsilon_{lower}` and :math:`\\epsilon_{upper}` (mA/deg); default: the model's
         identification of the knob (``KnobIdentification.eps_lower``/``eps_upper``).
     current_dead_zone : float, optional
-        Current with no tendon taut (mA); default: the model's identification. Needed only
-        when the search starts with a tendon taut.
+        Current with no tendon taut (mA); default: the model's identification. Without it the
+        search cannot tell a taut start and assumes the knob rests in the dead zone.
     step : float
         Unit step :math:`u` (deg).
     max_steps : int, optional
@@ -748,23 +683,17 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     max_travel : float, optional
         Travel limit of the search (deg of knob, every step counted, the return excluded);
         default :func:`default_max_travel` (the identification sweep's reach).
-    window : int
-        Steps in the least-squares slope window (reset at every reversal).
-    confirm_steps : int
-        Extra steps taken after the window slope crosses a threshold, so the hinge fit that
-        places the edge sees both sides of it.
     direction : int
-        Initial direction (+1 as in the paper, or -1).
+        Initial direction (+1 as in the paper, or -1) when no tendon is taut at the start.
     level_margin : float, optional
-        How far (mA) from ``current_dead_zone`` the current must be to tell which tendon is
-        taut at a start outside the dead zone; default ``0.6 * eps_upper`` (3 deg of loaded
-        slope with the default thresholds), above the motor's Coulomb friction. Closer starts
-        go in ``direction`` and turn back if the current moves away from the level by more.
+        How far (mA) from ``current_dead_zone`` a reading must be for a tendon to count as taut;
+        default: two degrees of the loaded slope (``eps_upper / 5``) beyond half the gap between
+        the rising and falling no-load currents (the motor's Coulomb friction).
     return_home : bool
         Return the knob to where it began after a successful search too (a failed one always
         returns it).
     progress : callable, optional
-        Called with each :class:`ProbeSample` and the window slope (NaN before it is full).
+        Called with each :class:`ProbeSample` and the slope of the last readings.
 
     Returns
     -------
@@ -773,10 +702,10 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     Raises
     ------
     ShiftDetectionError
-        No edge within the limits ("no edge found within N steps / X deg of knob travel"),
-        contact on both sides, a missing threshold, invalid options. Every error raised during
-        the search (from the probe too) has stopped the probe and returned the knob first; its
-        message says so.
+        No edge within the limits, an edge whose evidence is weak (the reason is given), contact
+        on both sides, a missing threshold, invalid options. Every error raised during the search
+        (from the probe too) has stopped the probe and returned the knob first; its message says
+        so.
     """
     k = int(knob)
     km = model.knob(k)
@@ -791,19 +720,27 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         max_steps = int(math.ceil(max_travel / step - 1e-9))
     if int(max_steps) < 1:
         raise ShiftDetectionError(f"the step limit must be at least 1, got {max_steps}")
-    if int(window) < 3:
-        raise ShiftDetectionError(f"the slope window must hold at least 3 steps, got {window}")
-    if int(confirm_steps) < 0:
-        raise ShiftDetectionError(f"confirm_steps must be >= 0, got {confirm_steps}")
     if direction not in (1, -1):
         raise ShiftDetectionError(f"direction must be +1 or -1, got {direction}")
-    margin = 0.6 * th.eps_upper if level_margin is None else float(level_margin)
+    if level_margin is None:
+        margin = th.no_load_spread + 2.0 * th.slope_loaded
+    else:
+        margin = float(level_margin)
+        if not (math.isfinite(margin) and margin > 0):
+            raise ShiftDetectionError(f"the level margin must be a positive number of mA, got {level_margin}")
 
-    search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(window),
-                     int(confirm_steps), int(direction), margin, progress)
+    search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(direction), margin,
+                     progress)
     start = search.start
     try:
-        hinge, transition = search.run()
+        kink = search.run()
+        d = search.dir
+        edge = "pos" if d > 0 else "neg"
+        if f"d_{edge}" in th.unfixed:
+            raise ShiftDetectionError(
+                f"knob {k}: a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
+                f"place d_{edge} (its dead-zone flat was too narrow to see on the sweep), so that edge gives "
+                "no offset; identify on a slower sweep")
     except BaseException as exc:
         returned, note = _return_knob(probe, start)
         if isinstance(exc, HystError):
@@ -812,27 +749,27 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
             except Exception:  # noqa: BLE001 - an error type with another signature
                 new = ShiftDetectionError(f"{exc}; {note}")
             raise new from exc
-        exc.add_note(note)
+        # Python 3.10 has no add_note: the note goes on stderr through the command layer's
+        # interrupt message instead; the knob has been returned either way
         raise
     returned = False
     if return_home:
         returned, note = _return_knob(probe, start)
         if not returned:
-            raise ShiftDetectionError(f"knob {k}: edge found at {hinge.edge:.2f} deg, but {note}")
-    d = search.dir
-    if transition == RISE:
-        edge = "pos" if d > 0 else "neg"
-    else:
-        # entering the dead zone moving + crosses its negative edge, moving - its positive one
-        edge = "neg" if d > 0 else "pos"
-    offset = hinge.edge - (km.d_pos if edge == "pos" else km.d_neg)
+            raise ShiftDetectionError(f"knob {k}: edge found at {kink.at:.2f} deg, but {note}")
+    offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
+    noise = _reading_noise(np.array(search.seg_c))
+    ev = Evidence(clarity=float(kink.clarity), edge_se=float(kink.se), residual=float(kink.residual),
+                  noise=float(noise), level=float(kink.level), no_load=th.current_dead_zone,
+                  slope_before=float(kink.before), slope_after=float(kink.after),
+                  n_before=int(kink.n_before), n_after=int(kink.n_after))
     return ShiftResult(
         knob=k, offset=float(offset), d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
-        edge=edge, edge_found_at=float(hinge.edge), direction=int(d), transition=transition,
+        edge=edge, edge_found_at=float(kink.at), direction=int(d), transition=RISE,
         start=start, travel=float(search.travel), steps=int(search.steps),
         contacts=tuple(float(c) for c in search.contacts), start_outside=search.start_outside,
         returned=returned, eps_lower=th.eps_lower, eps_upper=th.eps_upper, step=float(step),
-        trace=tuple(search.trace))
+        evidence=ev, trace=tuple(search.trace))
 
 
 def detect_shifts(model: Model, probes: Mapping[int, Any], **options: Any) -> dict[int, ShiftResult]:

@@ -34,7 +34,7 @@ from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, bootstrap_tip, fit_tip, z_path
 
-__all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "find_reversals",
+__all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "current_levels", "find_reversals",
            "identify", "plot_identification"]
 
 
@@ -414,3 +414,24 @@ def plot_identification(run: Run, result: Identification, path) -> None:
     fig.tight_layout()
     data = figure_bytes(fig, "png")
     atomic_write(path, lambda f: f.write(data))
+
+
+def current_levels(run: Run, knob: int, model: KnobModel, filter_hz: float | None = 20.0) -> KnobIdentification:
+    """What Algorithm 1 needs of a knob's current, read on a straight-shaft record for a known model.
+
+    For a model that did not come from this record (given by hand, or identified elsewhere):
+    the no-load levels, slopes and noise of the current, read where the model puts the tendons
+    slack or taut (as :func:`identify` stores them).
+
+    Raises
+    ------
+    IdentificationError
+        A record without the knob's command and current, or one that never reverses.
+    """
+    k = int(knob)
+    chk = check_sweep(run, k, need_current=True)
+    q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
+    t = np.asarray(run["t"], float)
+    c = condition(np.asarray(run[f"c{k}"], float), run.sample_rate, filter_hz)
+    reading = read_current(q, c, t, chk)
+    return _levels(q, c, t, model, None, reading, chk, None, {})
