@@ -789,6 +789,9 @@ class DeviceProbe:
         self.dwell = dwell if dwell and device.supports("dwell") else None
         self.mean = mean if mean and device.supports("mean") else None
         self.averaged = self.mean is not None
+        # readings taken while the knob still moves carry the motor's Coulomb friction of that
+        # direction; after a dwell the knob rests (Algorithm 1 reads the level accordingly)
+        self.reads_moving = self.dwell is None
         first = device.state(self.knob)
         self._check(first)
         self._q = first.angle

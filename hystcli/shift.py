@@ -46,6 +46,7 @@ from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
 
+from .current import JUMP_RATIO
 from .errors import DataError, HystError, ShiftDetectionError
 from .io import Run, atomic_write
 from .model import KnobModel, Model
@@ -118,12 +119,13 @@ class ReplayProbe:
     moving in, the walk goes on through the record's own turn until it comes back; the record
     then carries the physical history of that detour (backlash, friction), as a real knob would.
 
-    The current of a step is what a stepping motor measures while it moves: the mean of the
+    The current of a step is what a stepping motor measures while it moves: the median of the
     recorded current over the samples the knob passed during the last ``u`` of its approach to
-    ``q`` (one unit step), and the sample's ``q`` is the mean knob angle of those samples. That
-    mean is unbiased on the linear pieces of the current (its position is where it was measured)
-    and smooths a kink symmetrically, so the edge fit stays unbiased. With ``average=False`` the
-    current is read (linearly interpolated) at exactly ``q``.
+    ``q`` (one unit step), and the sample's ``q`` is the median knob angle of those samples. On
+    the straight pieces of the current that is where the mean would be, and a stiction spike or
+    an outlier within the step does not move it. With ``average=False`` the current is read
+    (linearly interpolated) at exactly ``q``. The readings are taken moving
+    (:attr:`reads_moving`): they carry the motor's Coulomb friction of the direction of motion.
 
     Parameters
     ----------
@@ -164,6 +166,7 @@ class ReplayProbe:
         self._pos = float(self._q[0])
         self._unit = None    # the last step length, the averaging span
         self.start = self._pos
+        self.reads_moving = True
 
     # -- Probe --------------------------------------------------------------------------------
     def position(self) -> float:
@@ -216,8 +219,10 @@ class ReplayProbe:
         cs = np.append(self._c[lo:j + 1][keep], c_end)
         tip = tip_end
         if self._y is not None:
-            tip = float(np.mean(np.append(self._y[lo:j + 1][keep], tip_end)))
-        return ProbeSample(float(np.mean(qs)), float(np.mean(cs)), tip)
+            tip = float(np.median(np.append(self._y[lo:j + 1][keep], tip_end)))
+        # medians, not means: a stiction spike or an outlier in the step leaves no trace, and on a
+        # straight piece of the current the median sits where the mean does
+        return ProbeSample(float(np.median(qs)), float(np.median(cs)), tip)
 
     def stop(self) -> bool:
         """Nothing moves in a replay."""
@@ -247,7 +252,7 @@ class ReplayProbe:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Thresholds:
-    """What the search needs of one knob's current: the gradient bounds and the no-load level.
+    """What the search needs of one knob's current: the gradient bounds and the no-load levels.
 
     Attributes
     ----------
@@ -256,10 +261,16 @@ class Thresholds:
     eps_upper : float
         :math:`\\epsilon_{upper}` (mA/deg): a slope at or above it means contact with a wall.
     current_dead_zone : float or None
-        Motor current with no tendon taut (mA): which tendon is taut at the start.
-    no_load_spread : float
-        Half the gap between the no-load currents while rising and while falling (the motor's
-        Coulomb friction), mA: a reading at rest lies anywhere within it.
+        Motor current with no tendon taut (mA): which tendon is taut, and whether a kink starts
+        from the dead zone.
+    no_load_rising, no_load_falling : float or None
+        The no-load current while the knob turns positive / negative (the motor's Coulomb
+        friction moves it with the direction of motion).
+    dead_zone_swing : float
+        How far the current moves across the dead zone from its middle (mA): a pretensioned
+        tendon's slope times half the dead zone's width.
+    noise : float
+        Noise of the current (mA).
     unfixed : tuple of str
         Edges the identification could not place (``d_pos``/``d_neg``): no offset from them.
     """
@@ -267,13 +278,35 @@ class Thresholds:
     eps_lower: float
     eps_upper: float
     current_dead_zone: float | None = None
-    no_load_spread: float = 0.0
+    no_load_rising: float | None = None
+    no_load_falling: float | None = None
+    dead_zone_swing: float = 0.0
+    noise: float = 0.0
     unfixed: tuple[str, ...] = ()
 
     @property
     def slope_loaded(self) -> float:
         """The loaded slope the thresholds were made from (eps_upper is five times it)."""
         return self.eps_upper / 5.0
+
+    def no_load(self, direction: int, moving: bool) -> tuple[float | None, float]:
+        """The no-load level and the half-width of the band around it that counts as slack (mA).
+
+        Read while moving in ``direction`` (a replay): that direction's no-load level. At rest (a
+        live step after a dwell): the middle of the two, with half their gap added to the band,
+        since a resting motor's static friction can sit anywhere in it. The band also holds the
+        swing of a pretensioned current across the dead zone, one degree of the loaded slope and
+        four noise levels.
+        """
+        level = self.current_dead_zone
+        spread = 0.0
+        if self.no_load_rising is not None and self.no_load_falling is not None:
+            if moving:
+                level = self.no_load_rising if direction > 0 else self.no_load_falling
+            else:
+                level = 0.5 * (self.no_load_rising + self.no_load_falling)
+                spread = 0.5 * abs(self.no_load_rising - self.no_load_falling)
+        return level, spread + self.dead_zone_swing + max(self.slope_loaded, 4.0 * self.noise)
 
 
 def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
@@ -288,6 +321,7 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
         thresholds are not ``0 < eps_lower < eps_upper``.
     """
     ident = model.identification.get(int(knob))
+    given_level = current_dead_zone is not None
     if eps_lower is None and ident is not None:
         eps_lower = ident.eps_lower
     if eps_upper is None and ident is not None:
@@ -307,14 +341,15 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
                                   f"(got eps_lower = {eps_lower:g}, eps_upper = {eps_upper:g})")
     if current_dead_zone is not None and not math.isfinite(current_dead_zone):
         raise ShiftDetectionError(f"current_dead_zone must be finite, got {current_dead_zone}")
-    spread = 0.0
-    unfixed: tuple[str, ...] = ()
+    extra: dict = {}
     if ident is not None:
-        if ident.no_load_rising is not None and ident.no_load_falling is not None:
-            spread = 0.5 * abs(ident.no_load_rising - ident.no_load_falling)
-        unfixed = tuple(ident.unfixed)
+        km = model.knob(int(knob))
+        if not given_level:
+            extra.update(no_load_rising=ident.no_load_rising, no_load_falling=ident.no_load_falling)
+        extra.update(dead_zone_swing=abs(ident.slope_dead_zone) * 0.5 * max(km.d_pos - km.d_neg, 0.0),
+                     noise=float(ident.current_noise or 0.0), unfixed=tuple(ident.unfixed))
     return Thresholds(float(eps_lower), float(eps_upper),
-                      None if current_dead_zone is None else float(current_dead_zone), spread, unfixed)
+                      None if current_dead_zone is None else float(current_dead_zone), **extra)
 
 
 # --------------------------------------------------------------------------------------------
@@ -468,7 +503,7 @@ class _Search:
     LOADED_CHECK = 6  # readings after which a start that is loading all along turns round
 
     def __init__(self, probe: Any, knob: int, th: Thresholds, step: float, max_steps: int,
-                 max_travel: float, direction: int, level_margin: float,
+                 max_travel: float, direction: int, level_margin: float | None,
                  progress: Callable[[ProbeSample, float], None] | None) -> None:
         self.probe, self.knob, self.th = probe, knob, th
         self.u, self.max_steps, self.max_travel = step, max_steps, max_travel
@@ -485,6 +520,7 @@ class _Search:
         self.contacts: list[float] = []
         self.start_outside = False
         self.pending_refusal: str | None = None
+        self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
 
     # -- moving -------------------------------------------------------------------------------
@@ -522,12 +558,14 @@ class _Search:
 
     # -- the level ----------------------------------------------------------------------------
     def _taut_side(self, level: float) -> int:
-        """+1 (positive tendon), -1 (negative) or 0 (none) from a current level."""
-        c0 = self.th.current_dead_zone
+        """+1 (positive tendon), -1 (negative) or 0 (none) from a current read moving this way."""
+        c0, band = self.th.no_load(self.dir, self.moving)
         if c0 is None:
             return 0
+        if self.margin is not None:
+            band = self.margin
         off = level - c0
-        if abs(off) <= self.margin:
+        if abs(off) <= band:
             return 0
         return 1 if off > 0 else -1
 
@@ -554,6 +592,13 @@ class _Search:
         if kink.after < 0.5 * self.th.eps_lower:
             return False, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
                            f"below a taut tendon's ({self.th.eps_lower:.3g})")
+        if abs(kink.before) > JUMP_RATIO * kink.after:
+            return False, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
+                           f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
+        # a tendon taken up pulls the current out of the no-load band on its own side; a tendon
+        # unloading toward the band only arrives at it: wait until the current has left it
+        if self._taut_side(self.seg_c[-1]) != self.dir:
+            return False, ""
         side = self._taut_side(kink.level)
         if side != 0:
             # the flat before the kink sits on a loaded level: a plateau of a taut tendon, not
@@ -585,18 +630,18 @@ class _Search:
                             f"{self.contacts[1]:.2f} deg): no free side to find a dead-zone edge")
                     self._reverse()
                     continue
-                # a start in the dead zone that has been loading all along: a tendon was taut
-                if (self.seg_from_start and not self.start_outside and n == self.LOADED_CHECK
-                        and _ls_slope(q, c) >= self.th.eps_lower):
-                    side = self._taut_side(float(c[-1]))
-                    if side == self.dir:
-                        self._turn_toward_slack(side)
-                        continue
-                if n < 8:
+                if n < self.LOADED_CHECK:
                     continue
                 sig = _reading_noise(c)
                 sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
                 kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
+                # a start in the dead zone that has been loading from the first reading (no kink
+                # out of a flat stretch): a tendon was taut after all
+                if (kink is None and self.seg_from_start and not self.start_outside
+                        and n == self.LOADED_CHECK and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower
+                        and self._taut_side(float(c[-1])) == self.dir):
+                    self._turn_toward_slack(self.dir)
+                    continue
                 if kink is None:
                     continue
                 ok, why = self._judge(kink)
@@ -686,9 +731,9 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     direction : int
         Initial direction (+1 as in the paper, or -1) when no tendon is taut at the start.
     level_margin : float, optional
-        How far (mA) from ``current_dead_zone`` a reading must be for a tendon to count as taut;
-        default: two degrees of the loaded slope (``eps_upper / 5``) beyond half the gap between
-        the rising and falling no-load currents (the motor's Coulomb friction).
+        How far (mA) from the no-load level a reading must be for a tendon to count as taut;
+        default :meth:`Thresholds.no_load` (the Coulomb gap when the probe reads at rest, a
+        pretensioned current's swing across the dead zone, a degree of the loaded slope).
     return_home : bool
         Return the knob to where it began after a successful search too (a failed one always
         returns it).
@@ -722,9 +767,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         raise ShiftDetectionError(f"the step limit must be at least 1, got {max_steps}")
     if direction not in (1, -1):
         raise ShiftDetectionError(f"direction must be +1 or -1, got {direction}")
-    if level_margin is None:
-        margin = th.no_load_spread + 2.0 * th.slope_loaded
-    else:
+    margin = None
+    if level_margin is not None:
         margin = float(level_margin)
         if not (math.isfinite(margin) and margin > 0):
             raise ShiftDetectionError(f"the level margin must be a positive number of mA, got {level_margin}")
