@@ -114,21 +114,27 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
 
 
 def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> bool:
-    """Whether the replay has a monotone stretch that crosses a shifted edge by 2 deg either side
-    within the travel limit of its start: the denominator of the detection rate."""
+    """Whether the edge the search has to find lies within its travel limit and the replay.
+
+    From the true state at the replay's start: in the shifted dead zone the search goes the way
+    the record goes first, to that edge; with the positive tendon taut it goes through
+    the dead zone to the negative edge, with the negative one taut to the positive edge. The
+    edge must be within the travel limit of the start (3 deg past it to confirm it) and the
+    replay must go that far: the denominator of the detection rate.
+    """
     tr, o = case.truth, case.offset
     start = float(q[0])
-    dq = np.sign(np.diff(q))
-    cuts = np.flatnonzero(dq[1:] * dq[:-1] < 0) + 1
-    bounds = np.concatenate([[0], cuts, [q.size - 1]])
-    for edge, d in ((tr.d_pos + o, 1), (tr.d_neg + o, -1)):
-        if abs(edge - start) + 2.0 > travel:
-            continue
-        for a, b in zip(bounds[:-1], bounds[1:]):
-            lo, hi = (q[a], q[b]) if d > 0 else (q[b], q[a])
-            if np.sign(q[b] - q[a]) == d and lo <= edge - 2.0 and hi >= edge + 2.0:
-                return True
-    return False
+    e_pos, e_neg = tr.d_pos + o, tr.d_neg + o
+    moves = np.flatnonzero(np.abs(q - start) > 1e-9)
+    first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
+    if e_neg < start < e_pos:
+        need = e_pos if first > 0 else e_neg       # slack: the way the record goes first
+    else:
+        need = e_neg if start >= e_pos else e_pos  # taut: through the dead zone to the other edge
+    d = 1 if need > start else -1
+    far = need + 3.0 * d
+    covered = float(np.max(q)) >= far if d > 0 else float(np.min(q)) <= far
+    return abs(far - start) <= travel and covered
 
 
 def straight_model(case: plants.ReplayCase) -> tuple[Model, str]:

@@ -804,6 +804,12 @@ class DeviceProbe:
         """The knob angle (deg) after the last step."""
         return self._q
 
+    def read(self) -> Any:
+        """The knob at rest where it is: a sample ``(q, current, tip)`` without moving (the
+        state the device reported when the probe opened, before any step)."""
+        s = self.last
+        return ProbeSample(s.angle, s.current, s.tip)
+
     def step_to(self, q: float) -> Any:
         """Move the knob to ``q`` and return a sample ``(q, current, tip)``.
 

@@ -54,7 +54,7 @@ from .model import KnobModel, Model
 RISE = "rise"
 """The slope rose through eps_lower out of the dead zone: a tendon taken up (every offset's edge)."""
 
-MIN_CLARITY = 8.0
+MIN_CLARITY = 7.0
 """Fewest standard errors the jump in slope at an accepted edge must stand above zero."""
 
 MAX_RESIDUAL = 4.0
@@ -167,6 +167,10 @@ class ReplayProbe:
         self._unit = None    # the last step length, the averaging span
         self.start = self._pos
         self.reads_moving = True
+        moves = np.flatnonzero(np.abs(self._q - self._q[0]) > 1e-9)
+        # the way the record itself goes first: a search that starts that way need not walk the
+        # record through its own turn
+        self.first_direction = int(np.sign(self._q[moves[0]] - self._q[0])) if moves.size else 1
 
     # -- Probe --------------------------------------------------------------------------------
     def position(self) -> float:
@@ -223,6 +227,14 @@ class ReplayProbe:
         # medians, not means: a stiction spike or an outlier in the step leaves no trace, and on a
         # straight piece of the current the median sits where the mean does
         return ProbeSample(float(np.median(qs)), float(np.median(cs)), tip)
+
+    def read(self) -> ProbeSample:
+        """The current where the record starts, without moving: the median over the record's
+        first unit step of knob travel (the search's default step, 0.5 deg)."""
+        span = np.flatnonzero(np.abs(self._q - self._q[0]) <= 0.5)
+        first = span[span == np.arange(span.size)] if span.size else np.array([0])
+        return ProbeSample(float(self._q[0]), float(np.median(self._c[first])),
+                           None if self._y is None else float(self._y[0]))
 
     def stop(self) -> bool:
         """Nothing moves in a replay."""
@@ -611,9 +623,22 @@ class _Search:
         from .current import loading_edge
 
         try:
-            for _ in range(self.FIRST):
-                self._step()
-            side = self._taut_side(float(np.median(self.seg_c)))
+            first = getattr(self.probe, "first_direction", None)
+            read = getattr(self.probe, "read", None)
+            if first in (1, -1):
+                # a record: the first steps go the way it goes (no walk through its own turn),
+                # and the state is read past the start, where a stiction burst may sit
+                self.dir = first
+                for _ in range(self.FIRST):
+                    self._step()
+                side = self._taut_side(float(np.median(self.seg_c[1:])))
+            elif read is not None:
+                # a robot at rest: its reading before any step
+                side = self._taut_side(float(read().current))
+            else:
+                for _ in range(self.FIRST):
+                    self._step()
+                side = self._taut_side(float(np.median(self.seg_c[1:])))
             if side != 0:
                 self._turn_toward_slack(side)
             while True:
