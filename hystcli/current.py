@@ -334,3 +334,42 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
         return None
     return kink
+
+
+def arrival_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
+                 resolution: float | None = None) -> Kink | None:
+    """Where an unloading tendon's current arrives at the dead zone's flat, or None.
+
+    The mirror of :func:`loading_edge` on a stretch that starts with a tendon taut and moves
+    toward the dead zone: the first flat piece (at least a degree long) after a clearly rising
+    one (loading-positive slope: the current moving back toward its no-load level) ends the
+    unloading. Where that happens depends on the current law (the knob position of the slack for
+    a stretching tendon, the end of the tip's unloading for a load-following one), so it is no
+    dead-zone edge by itself: Algorithm 1 compares it with where the same reading found it on the
+    identification sweep. The kink's clarity is returned positive (the slope falls here).
+    """
+    q = np.asarray(q, float)
+    c = np.asarray(c, float)
+    d = direction
+    x = d * (q - q[0])
+    if x.size < 2 * minlen + 1:
+        return None
+    pcs = pieces(x, c, minlen)
+    slopes = [d * m for (_, _, m, _) in pcs]
+    for j in range(1, len(pcs)):
+        length = x[pcs[j][1] - 1] - x[pcs[j][0]]
+        steep = max(slopes[:j])
+        if length < 1.0 or steep <= 0 or abs(slopes[j]) > FLAT_AFTER * steep:
+            continue
+        ju = j - 1      # the unloading piece the flat follows
+        rise = slopes[ju] * (x[pcs[ju][1] - 1] - x[pcs[ju][0]] + 1e-9)
+        if slopes[ju] <= 0 or rise < 6 * sig:
+            return None
+        kink = kink_fit(q[pcs[ju][0]:pcs[j][1]], c[pcs[ju][0]:pcs[j][1]], d,
+                        lo=q[pcs[ju][0]], hi=q[pcs[j][1] - 1], curved=False,
+                        min_side=max(2, minlen // 2), resolution=resolution)
+        if kink is None or -kink.clarity < MIN_CLARITY:
+            return None
+        return Kink(kink.at, kink.se, kink.before, kink.after, -kink.clarity, kink.residual,
+                    kink.n_before, kink.n_after, kink.level)
+    return None

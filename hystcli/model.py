@@ -507,6 +507,10 @@ class KnobIdentification:
     current_edge_pos, current_edge_neg : float or None
         Where the sweep's current showed a tendon taken up (deg of knob): the loading edges read
         the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
+    current_arrive_rising, current_arrive_falling : float or None
+        Where, on the sweep's branches after a reversal, the unloading tendon's current arrived at
+        the dead zone (deg): rising, the negative tendon; falling, the positive one. Algorithm 1
+        compares a search that starts with a tendon taut against these.
     unfixed : tuple of str
         Dead-zone edges the sweep could not place (``"d_pos"``, ``"d_neg"``): Algorithm 1 must
         not take an offset from them.
@@ -524,6 +528,8 @@ class KnobIdentification:
     no_load_falling: float | None = None
     current_edge_pos: float | None = None
     current_edge_neg: float | None = None
+    current_arrive_rising: float | None = None
+    current_arrive_falling: float | None = None
     unfixed: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
@@ -531,7 +537,7 @@ class KnobIdentification:
         object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
 
     OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
-                "current_edge_pos", "current_edge_neg")
+                "current_edge_pos", "current_edge_neg", "current_arrive_rising", "current_arrive_falling")
     """Fields a model file may leave out (older files have none of them but the first)."""
 
     @property

@@ -19,9 +19,14 @@ real current is not one law:
 * **where the search starts.** The first readings' level against the no-load level the
   identification measured tells the state: within the margin, no tendon is taut and the search
   goes its way; above it the positive tendon is taut (the motor current is signed), below it the
-  negative one, and the search turns toward and *through* the dead zone. A current that moves back
-  toward its no-load level is a tendon unloading, never an edge: after a backlash plateau it
-  unloads wherever that plateau ends, which depends on the history, so no offset is taken there.
+  negative one, and the search turns toward and *through* the dead zone to the far edge. A current
+  that moves back toward its no-load level is a tendon unloading, never an edge: where it meets
+  the dead zone depends on the current law (the knob position of the slack for a stretching
+  tendon, the end of the tip's unloading for one that follows the tip's load), so it gives no
+  offset; but when the identification sweep's branches show where it lies (read the same way,
+  after a reversal well past the backlash), the offset it implies must agree with the loading
+  edge's, or the search refuses. (Used alone, it gave wrong offsets on 8 of 300 independent
+  plants: ``bench/zoo.py``.)
   A start in the dead zone whose current turns out to be loading from the first steps turns round
   the same way.
 * **what an edge is.** On the readings since the last reversal, the loading edge is a jump in
@@ -62,6 +67,12 @@ MAX_RESIDUAL = 4.0
 
 AFTER_STEPS = 4
 """Readings past a kink (and at least 1.5 deg of travel) before it is judged."""
+
+ARRIVAL_AGREE = 2.0
+"""Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
+the one its loading edge gives, when a search sees both."""
+
+LOAD = "load"
 
 
 # --------------------------------------------------------------------------------------------
@@ -421,11 +432,11 @@ class ShiftResult:
     edge : str
         Which edge was found: ``"pos"`` (:math:`\\tilde D_{pos}`) or ``"neg"``.
     edge_found_at : float
-        Knob angle of that edge (deg), from the two-line fit.
+        Knob angle of the kink the offset came from (deg), from the two-line fit.
     direction : int
         Direction of motion when it was found (+1 or -1).
     transition : str
-        ``"rise"``: a tendon taken up out of the dead zone (the only edge an offset comes from).
+        ``"rise"``: a tendon taken up out of the dead zone (every offset's kink).
     start : float
         Knob angle where the search began and where the knob was returned (deg).
     travel : float
@@ -532,6 +543,8 @@ class _Search:
         self.contacts: list[float] = []
         self.start_outside = False
         self.pending_refusal: str | None = None
+        self.arrival = None          # where an unloading tendon's current met the dead zone
+        self.plateaus = {1: 0.0, -1: 0.0}
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
 
@@ -619,7 +632,27 @@ class _Search:
                            f"level {self.th.current_dead_zone:.1f} mA: a taut tendon's plateau, not the dead zone")
         return True, ""
 
-    def run(self):  # noqa: ANN201 - (Kink, direction)
+    def _watch_arrival(self, q: np.ndarray, c: np.ndarray, sig: float) -> None:
+        """From a taut start: note where the unloading tendon's current meets the dead zone.
+
+        Kept only when the tendon had left its backlash plateau well before (the travel from the
+        start exceeds the model's backlash on that side by a degree), so the arrival is where the
+        identification sweep's branches put it, and only once the current has sat in the no-load
+        band for four readings and 1.5 deg past it.
+        """
+        from .current import arrival_edge
+
+        if not self.start_outside or self.arrival is not None or q.size < 8:
+            return
+        if any(self._taut_side(float(v)) != 0 for v in c[-4:]):
+            return
+        a = arrival_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
+        if a is None or a.n_after < AFTER_STEPS or self.dir * (q[-1] - a.at) < 1.5:
+            return
+        if self.dir * (a.at - self.start) >= self.plateaus[self.dir] + 1.0:
+            self.arrival = a
+
+    def run(self):  # noqa: ANN201 - (kind, Kink)
         from .current import loading_edge
 
         try:
@@ -667,11 +700,12 @@ class _Search:
                         and self._taut_side(float(c[-1])) == self.dir):
                     self._turn_toward_slack(self.dir)
                     continue
+                self._watch_arrival(q, c, sig)
                 if kink is None:
                     continue
                 ok, why = self._judge(kink)
                 if ok:
-                    return kink
+                    return LOAD, kink
                 if why:
                     self.pending_refusal = why
         except _LimitReached as lim:
@@ -713,15 +747,18 @@ DEFAULT_MAX_TRAVEL = 25.0
 def default_max_travel(model: Model, knob: int) -> float:
     """The travel limit of a search when none is given (deg of knob).
 
-    The largest ``|q|`` of the identification sweep (``KnobIdentification.q_min``/``q_max``):
-    the knob has already been driven that far on this catheter, and a search from the middle
-    reaches every edge inside it (a dead zone of +-19 deg shifted by 27 deg lies within the
-    paper's +-40 deg sweep); :data:`DEFAULT_MAX_TRAVEL` when the model has no identification.
+    The largest ``|q|`` of the identification sweep (``KnobIdentification.q_min``/``q_max``)
+    plus half the dead zone's width: a search that starts with a tendon taut crosses the whole
+    dead zone to the far edge, and stops a few degrees past it, so in the tendons' own terms
+    (``u = q - offset``) it never drives the knob beyond what the sweep already did;
+    :data:`DEFAULT_MAX_TRAVEL` when the model has no identification.
     """
     ident = model.identification.get(int(knob)) if model.identification else None
     if ident is None:
         return DEFAULT_MAX_TRAVEL
     reach = max(abs(float(ident.q_min)), abs(float(ident.q_max)))
+    km = model.knob(int(knob))
+    reach += 0.5 * max(km.d_pos - km.d_neg, 0.0)
     return reach if math.isfinite(reach) and reach > 0 else DEFAULT_MAX_TRAVEL
 
 
@@ -800,16 +837,35 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
 
     search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(direction), margin,
                      progress)
+    # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
+    search.plateaus = {1: km.b_neg, -1: km.b_pos}
+    ident = model.identification.get(k)
+    arrive = {1: None if ident is None else ident.current_arrive_rising,
+              -1: None if ident is None else ident.current_arrive_falling}
+    if all(v is None for v in arrive.values()):
+        search.plateaus = {1: math.inf, -1: math.inf}   # no reference: never keep an arrival
     start = search.start
     try:
-        kink = search.run()
+        kind, kink = search.run()
         d = search.dir
-        edge = "pos" if d > 0 else "neg"
-        if f"d_{edge}" in th.unfixed:
-            raise ShiftDetectionError(
-                f"knob {k}: a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
-                f"place d_{edge} (its dead-zone flat was too narrow to see on the sweep), so that edge gives "
-                "no offset; identify on a slower sweep")
+        if kind == LOAD:
+            edge = "pos" if d > 0 else "neg"
+            if f"d_{edge}" in th.unfixed:
+                raise ShiftDetectionError(
+                    f"knob {k}: a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
+                    f"place d_{edge} (its dead-zone flat was too narrow to see on the sweep), so that edge gives "
+                    "no offset; identify on a slower sweep")
+            offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
+            a = search.arrival
+            ref = arrive.get(d)
+            if a is not None and ref is not None and abs((a.at - ref) - offset) > ARRIVAL_AGREE:
+                raise ShiftDetectionError(
+                    f"knob {k}: the readings disagree: where the unloading tendon's current met the dead zone "
+                    f"({a.at:.2f} deg) gives an offset of {a.at - ref:+.2f} deg, the loading edge at "
+                    f"{kink.at:.2f} deg one of {offset:+.2f} deg")
+            transition = RISE
+        else:  # pragma: no cover - the search returns loading edges only
+            raise ShiftDetectionError(f"knob {k}: no loading edge")
     except BaseException as exc:
         returned, note = _return_knob(probe, start)
         if isinstance(exc, HystError):
@@ -826,7 +882,6 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         returned, note = _return_knob(probe, start)
         if not returned:
             raise ShiftDetectionError(f"knob {k}: edge found at {kink.at:.2f} deg, but {note}")
-    offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
     noise = _reading_noise(np.array(search.seg_c))
     ev = Evidence(clarity=float(kink.clarity), edge_se=float(kink.se), residual=float(kink.residual),
                   noise=float(noise), level=float(kink.level), no_load=th.current_dead_zone,
@@ -834,7 +889,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                   n_before=int(kink.n_before), n_after=int(kink.n_after))
     return ShiftResult(
         knob=k, offset=float(offset), d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
-        edge=edge, edge_found_at=float(kink.at), direction=int(d), transition=RISE,
+        edge=edge, edge_found_at=float(kink.at), direction=int(d), transition=transition,
         start=start, travel=float(search.travel), steps=int(search.steps),
         contacts=tuple(float(c) for c in search.contacts), start_outside=search.start_outside,
         returned=returned, eps_lower=th.eps_lower, eps_upper=th.eps_upper, step=float(step),

@@ -359,7 +359,9 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         rmse=rmse, stderr={k: v for k, v in stderr.items() if math.isfinite(v)}, current_dead_zone=c_dz,
         current_noise=noise, no_load_rising=no_rise, no_load_falling=no_fall,
         current_edge_pos=None if reading is None else reading.edges.get("pos"),
-        current_edge_neg=None if reading is None else reading.edges.get("neg"), unfixed=unfixed)
+        current_edge_neg=None if reading is None else reading.edges.get("neg"),
+        current_arrive_rising=None if reading is None else reading.arrivals.get(1),
+        current_arrive_falling=None if reading is None else reading.arrivals.get(-1), unfixed=unfixed)
 
 
 def _dead_zone_slope(q: np.ndarray, c: np.ndarray, chk: SweepCheck, lo: float, hi: float) -> float:

@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..current import FLAT_AFTER, Kink, edge_piece, loading_edge, pieces, robust_noise
+from ..current import FLAT_AFTER, Kink, arrival_edge, edge_piece, loading_edge, pieces, robust_noise
 from .sweep import SweepCheck
 
 @dataclass(frozen=True)
@@ -50,6 +50,8 @@ class Stretch:
         dC/dq (loading-positive) of the pieces either side of the edge.
     plateau : float or None
         Travel from the reversal over which the current holds before it unloads (deg).
+    arrival : Kink or None
+        Where the unloading tendon's current arrives at the dead zone (a stretch from a reversal).
     """
 
     start: int
@@ -61,6 +63,7 @@ class Stretch:
     dead_slope: float | None = None
     loaded_slope: float | None = None
     plateau: float | None = None
+    arrival: Kink | None = None
 
 
 @dataclass(frozen=True)
@@ -76,6 +79,10 @@ class CurrentReading:
     backlash : dict
         ``"pos"``/``"neg"`` -> plateau width (deg) when the current shows one.
     backlash_se : dict
+    arrivals : dict
+        ``+1``/``-1`` -> where, moving that way after a reversal, the unloading tendon's current
+        arrives at the dead zone (deg): the negative tendon's while rising, the positive's while
+        falling.
     no_load : dict
         ``+1``/``-1`` -> no-load current while moving that way (mA).
     loaded_slope, dead_slope : float
@@ -89,6 +96,7 @@ class CurrentReading:
     edges_se: dict = field(default_factory=dict)
     backlash: dict = field(default_factory=dict)
     backlash_se: dict = field(default_factory=dict)
+    arrivals: dict = field(default_factory=dict)
     no_load: dict = field(default_factory=dict)
     loaded_slope: float = math.nan
     dead_slope: float = math.nan
@@ -147,6 +155,8 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     minlen = max(2, int(round(0.5 / width)))
     sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
     kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
+    arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
+               if from_reversal else None)
     plateau = None
     if from_reversal and xa.size >= 10:
         # from the reversal on (the slow start included): its own pieces, its own dead zone
@@ -154,9 +164,9 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         sa = [d * m for (_, _, m, _) in pa]
         plateau = _plateau(pa, sa, xa, sig, from_reversal, _dead_piece(pa, sa, xa, edge_piece(pa, sa, xa, sig)))
     if kink is None:
-        return Stretch(start, stop, d, from_reversal, plateau=plateau)
+        return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival)
     return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
-                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau)
+                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival)
 
 
 def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> float | None:
@@ -255,9 +265,15 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
             backlash_se["pos" if d > 0 else "neg"] = (float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size))
                                                       if arr.size > 1 else 0.25)
+    arrivals = {}
+    for d in (1, -1):
+        arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])
+        # the stretches must agree (within a degree) for the arrival to be a reference
+        if arr.size and np.all(np.abs(arr - np.median(arr)) <= 1.0):
+            arrivals[d] = float(np.median(arr))
     loaded = [s.loaded_slope for s in stretches if s.loaded_slope is not None]
     dead = [abs(s.dead_slope) for s in stretches if s.dead_slope is not None]
     return CurrentReading(edges=edges, edges_se=edges_se, backlash=backlash, backlash_se=backlash_se,
-                          no_load=levels, loaded_slope=float(np.median(loaded)) if loaded else math.nan,
+                          arrivals=arrivals, no_load=levels, loaded_slope=float(np.median(loaded)) if loaded else math.nan,
                           dead_slope=float(np.median(dead)) if dead else math.nan, noise=noise,
                           stretches=tuple(stretches))
