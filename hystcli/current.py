@@ -282,10 +282,11 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
     best, best_pre = None, math.inf
     for j in range(n - 1):
         pre, post = slopes[j], slopes[j + 1]
-        if post <= 0 or pre > JUMP_RATIO * post:
+        if post <= 0 or abs(pre) > JUMP_RATIO * post:
             continue
         length = xb[pieces[j + 1][1] - 1] - xb[pieces[j + 1][0]] + 1e-9
-        if (post - pre) * length < 6 * sig:
+        # the piece after the jump must itself climb clearly: a loaded tendon, not a flat
+        if (post - pre) * length < 6 * sig or post * length < 6 * sig:
             continue
         # nothing flat after it (a dead zone still to come means this was a tendon unloading);
         # a short last piece is the reversal's rounding, not a dead zone
@@ -320,8 +321,12 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     j = edge_piece(pcs, slopes, x, sig)
     if j is None:
         return None
-    a0 = pcs[j][0]
-    # the kink fit sees the flat piece and the loaded run up to a wall (the next qualifying jump)
+    # the kink fit sees the whole flat stretch before the jump (noise may have split it into
+    # pieces) and the loaded run up to a wall (the next qualifying jump)
+    first = j
+    while first > 0 and abs(slopes[first - 1]) <= max(FLAT_AFTER * slopes[j + 1], 2.0 * abs(slopes[j])):
+        first -= 1
+    a0 = pcs[first][0]
     stop = x.size
     for jj in range(j + 2, len(pcs)):
         if slopes[jj - 1] <= JUMP_RATIO * slopes[jj] and (slopes[jj] - slopes[jj - 1]) * (
@@ -329,8 +334,10 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
             stop = pcs[jj][0]
             break
     lo_b, hi_b = pcs[j][0], pcs[j + 1][1] - 1
+    # a stiffening loaded side needs its quadratic term, and enough points to carry it
+    curved = stop - pcs[j + 1][0] >= 10
     kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
-                    curved=True, min_side=max(2, minlen // 2), resolution=resolution)
+                    curved=curved, min_side=max(2, minlen // 2), resolution=resolution)
     if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
         return None
     return kink
@@ -358,8 +365,9 @@ def arrival_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     slopes = [d * m for (_, _, m, _) in pcs]
     for j in range(1, len(pcs)):
         length = x[pcs[j][1] - 1] - x[pcs[j][0]]
-        steep = max(slopes[:j])
-        if length < 1.0 or steep <= 0 or abs(slopes[j]) > FLAT_AFTER * steep:
+        # flat against the piece it follows (the unloading slope), not only against a steep
+        # backlash piece before that
+        if length < 1.0 or slopes[j - 1] <= 0 or abs(slopes[j]) > 0.2 * slopes[j - 1]:
             continue
         ju = j - 1      # the unloading piece the flat follows
         rise = slopes[ju] * (x[pcs[ju][1] - 1] - x[pcs[ju][0]] + 1e-9)

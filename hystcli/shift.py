@@ -622,7 +622,7 @@ class _Search:
                            f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
         # a tendon taken up pulls the current out of the no-load band on its own side; a tendon
         # unloading toward the band only arrives at it: wait until the current has left it
-        if self._taut_side(self.seg_c[-1]) != self.dir:
+        if self.th.current_dead_zone is not None and self._taut_side(self.seg_c[-1]) != self.dir:
             return False, ""
         side = self._taut_side(kink.level)
         if side != 0:
@@ -678,9 +678,12 @@ class _Search:
                 self._step()
                 n = len(self.seg_q)
                 q, c = np.array(self.seg_q), np.array(self.seg_c)
-                # contact: the last readings climb far steeper than any tendon
+                # contact: the last readings climb far steeper than any tendon, away from the
+                # no-load level (backing off a wall is as steep, toward it)
+                c0 = self.th.no_load(self.dir, self.moving)[0]
                 if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
-                        (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper):
+                        (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper) and \
+                        (c0 is None or abs(c[-1] - c0) > abs(c[-3] - c0)):
                     self.contacts.append(self.q)
                     if len(self.contacts) > 1:
                         raise ShiftDetectionError(
@@ -696,10 +699,15 @@ class _Search:
                 # a start in the dead zone that has been loading from the first reading (no kink
                 # out of a flat stretch): a tendon was taut after all
                 if (kink is None and self.seg_from_start and not self.start_outside
-                        and n == self.LOADED_CHECK and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower
-                        and self._taut_side(float(c[-1])) == self.dir):
-                    self._turn_toward_slack(self.dir)
-                    continue
+                        and n == self.LOADED_CHECK and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower):
+                    if self.th.current_dead_zone is None:
+                        raise ShiftDetectionError(
+                            f"knob {self.knob} is loaded from the first steps (a tendon is already taut at "
+                            f"{self.start:g} deg) and the model has no no-load current level to tell which "
+                            "one: give --current-dead-zone (or identify the model with `hyst identify`)")
+                    if self._taut_side(float(c[-1])) == self.dir:
+                        self._turn_toward_slack(self.dir)
+                        continue
                 self._watch_arrival(q, c, sig)
                 if kink is None:
                     continue
@@ -874,8 +882,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
             except Exception:  # noqa: BLE001 - an error type with another signature
                 new = ShiftDetectionError(f"{exc}; {note}")
             raise new from exc
-        # Python 3.10 has no add_note: the note goes on stderr through the command layer's
-        # interrupt message instead; the knob has been returned either way
+        if hasattr(exc, "add_note"):   # Python 3.11+; on 3.10 the knob is returned all the same
+            exc.add_note(note)
         raise
     returned = False
     if return_home:

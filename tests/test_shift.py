@@ -50,7 +50,12 @@ def slow_ramp(amplitude: float = 26.0, speed: float = 1.0, fs: float = 500.0):
 # Must-show 2 of issue 3: the grid of shapes on the twin without effects
 # --------------------------------------------------------------------------------------------
 def test_offset_within_half_degree_over_the_shape_grid():
-    t, q = slow_ramp()
+    # issue 3's grid, with the search of issue 10: a start with a tendon taut (every bent shape
+    # here but the straight one puts the knob's rest outside the new dead zone or near it) goes
+    # through the dead zone to the far edge, so the replay reaches +-45 deg and the travel is
+    # bounded by the physics: the shift plus the dead zone's width plus the few degrees that
+    # confirm an edge
+    t, q = slow_ramp(amplitude=45.0)
     worst = 0.0
     seed = 0
     for alpha in (0, 45, 90, 135):
@@ -68,7 +73,8 @@ def test_offset_within_half_degree_over_the_shape_grid():
                 err = abs(r.offset - true)
                 worst = max(worst, err)
                 assert err < 0.5, (shape, k, r.offset, true)
-                assert r.travel <= 25.0
+                width = CATHETER.knobs[k].d_pos - CATHETER.knobs[k].d_neg
+                assert r.travel <= abs(true) + width + 6.0, (shape, k, r.travel)
                 assert r.d_pos == pytest.approx(CATHETER.knobs[k].d_pos + r.offset)
                 assert r.d_neg == pytest.approx(CATHETER.knobs[k].d_neg + r.offset)
     assert worst > 0  # noise was on
@@ -76,14 +82,20 @@ def test_offset_within_half_degree_over_the_shape_grid():
 
 def test_start_outside_is_recognised_on_the_twin():
     # alpha=90: shift 13.5 deg. theta=0 puts the new dead zone at [4.8, 22.6]: at q=0 the
-    # negative tendon is taut; theta=180 puts it at [-22.2, -4.4]: the positive one is.
-    t, q = slow_ramp()
-    for theta, edge in ((0, "neg"), (180, "pos")):
+    # negative tendon is taut, and the search crosses the dead zone to its positive edge;
+    # theta=180 puts it at [-22.2, -4.4]: the positive one is, and it goes to the negative edge.
+    # Where the unloading tendon meets the dead zone is never taken as the edge (issue 10).
+    # (The record goes up first: at theta=0 its own way is already toward the dead zone, at
+    # theta=180 the search must turn round.)
+    t, q = slow_ramp(amplitude=45.0)
+    for theta, edge in ((0, "pos"), (180, "neg")):
         run = twin.simulate(CATHETER, t, {1: q}, shape=Shape.parse(f"alpha=90,theta={theta}"),
                             effects=(), seed=7)
         r = detect_shift(MODEL, ReplayProbe(run, 1), 1)
-        assert r.start_outside and r.transition == "fall" and r.edge == edge
+        assert r.transition == "rise" and r.edge == edge
+        assert r.start_outside == (theta == 180)
         assert r.offset == pytest.approx(float(run.meta["true_offset1"]), abs=0.5)
+        assert r.evidence is not None and r.evidence.clarity >= 7.0
 
 
 # --------------------------------------------------------------------------------------------
@@ -219,8 +231,8 @@ def test_contact_on_both_sides_is_an_error():
 
 
 @pytest.mark.parametrize("dn,edge", [
-    (3.0, "neg"),      # negative tendon taut at 0 (16 mA): move + and take where it goes slack
-    (-17.0, "pos"),    # positive tendon taut (the level says so): turn and move -
+    (3.0, "pos"),      # negative tendon taut at 0 (16 mA): cross the dead zone to dp = 17
+    (-17.0, "neg"),    # positive tendon taut (dp = -3): turn and cross to dn = -17
     (1.0, None),       # barely taut (4 mA, below the Coulomb friction): the level cannot tell;
     (-15.0, None),     # either edge is fine, the offset must be right
 ])
@@ -230,18 +242,38 @@ def test_start_outside_the_dead_zone(dn, edge):
     p = LawProbe(dn, dp, seed=2)
     r = detect_shift(LAW_MODEL, p, 1)
     if edge is not None:
-        assert (r.edge, r.transition, r.start_outside) == (edge, "fall", True)
+        assert (r.edge, r.transition) == (edge, "rise")
         assert r.edge_found_at == pytest.approx(dn if edge == "neg" else dp, abs=0.15)
     assert r.offset == pytest.approx(offset, abs=0.15)
     assert r.travel <= 25.0 and p.q == 0.0
 
 
-def test_start_outside_without_a_dead_zone_level_says_which_option():
-    model = Model({1: STRAIGHT}, identification={1: KnobIdentification(0.5, 4.0, -40, 40)})
-    with pytest.raises(ShiftDetectionError, match="--current-dead-zone"):
-        detect_shift(model, LawProbe(8.0, 22.0), 1)       # taut over the whole first window
-    r = detect_shift(model, LawProbe(8.0, 22.0), 1, current_dead_zone=120.0)
-    assert r.edge_found_at == pytest.approx(8.0, abs=0.15)
+def test_an_unloading_tendon_is_not_an_edge():
+    # the issue-10 failure: the knob rests with the negative tendon taut and the tip on its
+    # backlash plateau; moving up, the current holds, then moves back toward its no-load level
+    # (a kink out of a flat stretch!) and flattens at it. The search must not take that kink.
+    class Plateau(LawProbe):
+        def current(self, q, d):
+            # load held until q = 2 (the plateau), unloading to the no-load level at q = 6,
+            # the dead zone [6, 20], the positive tendon from 20 on
+            unload = -4.0 * min(max(6.0 - q, 0.0), 4.0)
+            return 120.0 + unload + 4.0 * max(q - 20.0, 0.0) + self.rng.normal(0.0, self.noise)
+
+    p = Plateau(-8.0, 20.0, seed=3)
+    r = detect_shift(LAW_MODEL, p, 1)
+    assert r.edge == "pos" and r.edge_found_at == pytest.approx(20.0, abs=0.2)
+    assert r.start_outside and r.offset == pytest.approx(20.0 - STRAIGHT.d_pos, abs=0.2)
+
+
+def test_weak_evidence_is_refused_with_the_reason():
+    # a kink too small for the noise: a jump in slope of 0.6 mA/deg under 2 mA of noise per step
+    class Faint(LawProbe):
+        def current(self, q, d):
+            return 120.0 + 0.6 * max(q - 6.0, 0.0) + self.rng.normal(0.0, 2.0)
+
+    model = Model({1: STRAIGHT}, identification={1: KnobIdentification(0.05, 0.6, -40, 40, current_dead_zone=120.0)})
+    with pytest.raises(ShiftDetectionError, match="no edge found"):
+        detect_shift(model, Faint(-8.0, 6.0, seed=4), 1)
 
 
 def test_travel_and_step_limits_are_never_exceeded():
@@ -255,16 +287,17 @@ def test_travel_and_step_limits_are_never_exceeded():
     assert len(p.moves) == 7 + 1                      # seven steps, then the return
 
 
-def test_default_travel_limit_is_the_identification_sweeps_reach():
+def test_default_travel_limit_is_the_identification_sweeps_reach_and_half_the_dead_zone():
+    # reach 38 deg, dead zone [-5, 9]: 38 + 7 = 45 deg (a taut start crosses the dead zone)
     ident = KnobIdentification(0.5, 4.0, -35.0, 38.0, current_dead_zone=120.0)
-    assert default_max_travel(Model({1: STRAIGHT}, identification={1: ident}), 1) == 38.0
+    assert default_max_travel(Model({1: STRAIGHT}, identification={1: ident}), 1) == 45.0
     assert default_max_travel(Model({1: STRAIGHT}), 1) == DEFAULT_MAX_TRAVEL == 25.0
-    # a search with no edge inside stops at that reach: 38 / 0.5 = 76 steps
+    # a search with no edge inside stops at that limit: 45 / 0.5 = 90 steps
     p = LawProbe(-60.0, 60.0)
     model = Model({1: STRAIGHT}, identification={1: ident})
-    with pytest.raises(ShiftDetectionError, match=r"no edge found within 76 steps / 38.0 deg"):
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within 90 steps / 45.0 deg"):
         detect_shift(model, p, 1)
-    assert max(abs(m) for m in p.moves[:-1]) <= 38.0
+    assert max(abs(m) for m in p.moves[:-1]) <= 45.0
 
 
 def test_a_fault_stops_and_returns_the_knob_and_says_so():
@@ -340,7 +373,7 @@ def test_end_to_end_with_the_model_identify_makes():
     t, q = twin.sweep()
     model = identify(twin.simulate(CATHETER, t, {1: q, 2: q}, effects=(), seed=11)).model
     assert set(model.identification) == {1, 2}
-    t, q = slow_ramp()
+    t, q = slow_ramp(amplitude=45.0)
     for shape in ("alpha=90,theta=0", "alpha=135,theta=200", "alpha=45,theta=120"):
         run = twin.simulate(CATHETER, t, {1: q, 2: q}, shape=Shape.parse(shape), effects=(), seed=5)
         for k in (1, 2):

@@ -268,8 +268,8 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     arrivals = {}
     for d in (1, -1):
         arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])
-        # the stretches must agree (within a degree) for the arrival to be a reference
-        if arr.size and np.all(np.abs(arr - np.median(arr)) <= 1.0):
+        # two stretches at least, agreeing within a degree, for the arrival to be a reference
+        if arr.size >= 2 and np.all(np.abs(arr - np.median(arr)) <= 1.0):
             arrivals[d] = float(np.median(arr))
     loaded = [s.loaded_slope for s in stretches if s.loaded_slope is not None]
     dead = [abs(s.dead_slope) for s in stretches if s.dead_slope is not None]
