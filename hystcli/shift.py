@@ -51,7 +51,6 @@ from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from .current import JUMP_RATIO
 from .errors import DataError, HystError, ShiftDetectionError
 from .io import Run, atomic_write
 from .model import KnobModel, Model
@@ -319,11 +318,15 @@ class Thresholds:
         live step after a dwell): the middle of the two, with half their gap added to the band,
         since a resting motor's static friction can sit anywhere in it. The band also holds the
         swing of a pretensioned current across the dead zone, one degree of the loaded slope and
-        four noise levels.
+        four noise levels. Without the two levels (thresholds given by hand), half of
+        ``eps_upper`` stands for the unknown Coulomb friction.
         """
         level = self.current_dead_zone
-        spread = 0.0
+        # without the two levels the motor's Coulomb friction is unknown: allow for it as a
+        # sizeable share of the loaded slope (2.5 deg of it), as the paper's thresholds do
+        spread = 0.5 * self.eps_upper
         if self.no_load_rising is not None and self.no_load_falling is not None:
+            spread = 0.0
             if moving:
                 level = self.no_load_rising if direction > 0 else self.no_load_falling
             else:
@@ -617,6 +620,8 @@ class _Search:
         if kink.after < 0.5 * self.th.eps_lower:
             return False, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
                            f"below a taut tendon's ({self.th.eps_lower:.3g})")
+        from .current import JUMP_RATIO
+
         if abs(kink.before) > JUMP_RATIO * kink.after:
             return False, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
                            f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
@@ -699,13 +704,14 @@ class _Search:
                 # a start in the dead zone that has been loading from the first reading (no kink
                 # out of a flat stretch): a tendon was taut after all
                 if (kink is None and self.seg_from_start and not self.start_outside
-                        and n == self.LOADED_CHECK and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower):
+                        and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower and _ls_slope(q, c) >= self.th.eps_lower):
                     if self.th.current_dead_zone is None:
                         raise ShiftDetectionError(
                             f"knob {self.knob} is loaded from the first steps (a tendon is already taut at "
                             f"{self.start:g} deg) and the model has no no-load current level to tell which "
                             "one: give --current-dead-zone (or identify the model with `hyst identify`)")
                     if self._taut_side(float(c[-1])) == self.dir:
+                        # loading since the first reading and now clearly off the no-load level
                         self._turn_toward_slack(self.dir)
                         continue
                 self._watch_arrival(q, c, sig)

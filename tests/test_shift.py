@@ -193,7 +193,9 @@ class LawProbe:
 
 
 STRAIGHT = KnobModel(d_pos=9.0, d_neg=-5.0, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
-LAW_MODEL = Model({1: STRAIGHT}, identification={1: KnobIdentification(0.5, 4.0, -40, 40, current_dead_zone=120.0)})
+# what identify would store for the law below: no-load 120 mA, 126 moving up and 114 down
+LAW_MODEL = Model({1: STRAIGHT}, identification={1: KnobIdentification(
+    0.5, 4.0, -40, 40, current_dead_zone=120.0, no_load_rising=126.0, no_load_falling=114.0)})
 
 
 def test_paper_case_rise_at_the_positive_edge():
