@@ -43,7 +43,6 @@ real current is not one law:
 """
 from __future__ import annotations
 
-import io as _io
 import math
 import os
 from dataclasses import dataclass, field
@@ -945,44 +944,39 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: M
     inputs : iterable of path-like
         The command's inputs, never overwritten.
     """
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .metrics import figure_bytes
 
     results = list(results)
     if not results:
         raise ShiftDetectionError("nothing to plot: no knob was searched")
-    fig, axes = plt.subplots(1, len(results), figsize=(5.5 * len(results), 4.0), squeeze=False)
-    try:
-        for ax, r in zip(axes[0], results):
-            if background and r.knob in background:
-                bq, bc = background[r.knob]
-                ax.plot(bq, bc, color="0.8", lw=0.8, label="record")
-            tq = np.array([p[0] for p in r.trace])
-            tc = np.array([p[1] for p in r.trace])
-            ax.plot(tq, tc, ".-", color="tab:blue", ms=3, lw=0.8, label="search steps")
-            ax.axvspan(r.d_neg, r.d_pos, color="tab:green", alpha=0.12,
-                       label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
-            if model is not None and r.knob in model.knobs:
-                km: KnobModel = model.knob(r.knob)
-                for d in (km.d_neg, km.d_pos):
-                    ax.axvline(d, color="0.4", ls=":", lw=1)
-            edge_c = float(np.interp(r.edge_found_at, *_sorted(tq, tc))) if tq.size else 0.0
-            ax.plot([r.edge_found_at], [edge_c], "o", color="tab:red", ms=8,
-                    label=f"edge {r.edge} at {r.edge_found_at:.2f} deg")
-            for cq in r.contacts:
-                ax.axvline(cq, color="tab:orange", ls="--", lw=1)
-            ax.set_xlabel(f"knob {r.knob} angle (deg)")
-            ax.set_ylabel("motor current (mA)")
-            ax.set_title(f"knob {r.knob}: offset {r.offset:+.2f} deg")
-            ax.legend(fontsize=7, loc="best")
-        fig.tight_layout()
-        buf = _io.BytesIO()
-        fig.savefig(buf, format="png", dpi=110)
-    finally:
-        plt.close(fig)
-    data = buf.getvalue()
+    fig = Figure(figsize=(5.5 * len(results), 4.0))
+    axes = fig.subplots(1, len(results), squeeze=False)
+    for ax, r in zip(axes[0], results):
+        if background and r.knob in background:
+            bq, bc = background[r.knob]
+            ax.plot(bq, bc, color="0.8", lw=0.8, label="record")
+        tq = np.array([p[0] for p in r.trace])
+        tc = np.array([p[1] for p in r.trace])
+        ax.plot(tq, tc, ".-", color="tab:blue", ms=3, lw=0.8, label="search steps")
+        ax.axvspan(r.d_neg, r.d_pos, color="tab:green", alpha=0.12,
+                   label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
+        if model is not None and r.knob in model.knobs:
+            km: KnobModel = model.knob(r.knob)
+            for d in (km.d_neg, km.d_pos):
+                ax.axvline(d, color="0.4", ls=":", lw=1)
+        edge_c = float(np.interp(r.edge_found_at, *_sorted(tq, tc))) if tq.size else 0.0
+        ax.plot([r.edge_found_at], [edge_c], "o", color="tab:red", ms=8,
+                label=f"edge {r.edge} at {r.edge_found_at:.2f} deg")
+        for cq in r.contacts:
+            ax.axvline(cq, color="tab:orange", ls="--", lw=1)
+        ax.set_xlabel(f"knob {r.knob} angle (deg)")
+        ax.set_ylabel("motor current (mA)")
+        ax.set_title(f"knob {r.knob}: offset {r.offset:+.2f} deg")
+        ax.legend(fontsize=7, loc="best")
+    fig.tight_layout()
+    data = figure_bytes(fig, "png")
     atomic_write(path, lambda f: f.write(data), inputs=inputs)
 
 

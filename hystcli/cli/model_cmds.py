@@ -58,6 +58,9 @@ def identify_cmd(
     with about(sweep):
         run = io.read_run(sweep, require=("t",))
         result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
+    for fit in result.fits.values():
+        for w in fit.warnings:
+            warn(w)
     meta = dict(result.model.meta)
     meta.update(io.provenance(sweep, catheter=run.meta.get("catheter")))
     model = replace(result.model, meta=meta, geometry=geometry or result.model.geometry)
@@ -70,7 +73,7 @@ def identify_cmd(
         pass
     elif fmt == OutputFormat.json:
         echo_json({str(k): {"params": f.model.params(), "stderr": dict(f.stderr), "rmse": f.rmse,
-                            "method": f.method} for k, f in result.fits.items()})
+                            "method": f.method, "warnings": list(f.warnings)} for k, f in result.fits.items()})
     elif fmt == OutputFormat.table:
         for line in _identify_lines(result):
             typer.echo(line)

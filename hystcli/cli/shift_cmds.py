@@ -17,7 +17,7 @@ import typer
 from .. import device
 from .. import shift as shift_mod
 from ..errors import DataError
-from ..io import check_not_input, file_sha256, load_model, read_run, save_model
+from ..io import all_or_none, check_not_input, dumps_model, file_sha256, load_model, read_run
 from ..model import Model
 from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
                   command, echo_json, info)
@@ -55,18 +55,24 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
 
 
 def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
-    head = f"{'knob':>4}  {'offset':>8}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  {'travel':>7}  {'steps':>5}  notes"
+    head = (f"{'knob':>4}  {'offset':>8}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  {'+-':>5}  {'clarity':>7}  "
+            f"{'travel':>7}  {'steps':>5}  notes")
     lines = [head, "-" * len(head)]
     for k, r in results.items():
         notes = []
         if r.start_outside:
-            notes.append("started outside the dead zone")
+            notes.append("started with a tendon taut: crossed the dead zone")
         if r.contacts:
             notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
-        lines.append(f"{k:>4}  {r.offset:>+8.2f}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  "
+        ev = r.evidence
+        se = f"{ev.edge_se:5.2f}" if ev is not None else f"{'-':>5}"
+        clar = f"{ev.clarity:7.1f}" if ev is not None else f"{'-':>7}"
+        lines.append(f"{k:>4}  {r.offset:>+8.2f}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  {se}  {clar}  "
                      f"{r.travel:>7.1f}  {r.steps:>5}  {'; '.join(notes)}")
-    lines.append(f"(deg; offset = edge - D of the straight-shaft model; shifted model written to {output})")
+    lines.append("(deg; offset = edge - D of the straight-shaft model; +- the edge's standard error; clarity the "
+                 "jump in current slope at it in standard errors; shifted model written to "
+                 f"{output})")
     return "\n".join(lines)
 
 
@@ -74,17 +80,22 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
     "detect-shift",
     help=(
         "Detect the hysteresis shift of each knob after the shaft took a new shape, by the "
-        "slope of the motor current (Algorithm 1 of the paper), and write the shifted model.\n\n"
-        "The knob is stepped by --step degrees; the slope dC/dq over the last steps tells when "
-        "a tendon becomes taut (>= eps_lower: a dead-zone edge; offset = q - D_pos moving +, "
-        "q - D_neg moving -) or the tip meets a wall (>= eps_upper: reverse and find the other "
-        "edge). A start with a tendon already taut is handled by moving toward the dead zone. "
-        "Thresholds come from the model's identification unless given. The search never exceeds "
-        "--max-steps / --max-travel and returns the knob to where it began.\n\n"
-        "--replay walks a run recorded under the new shape (a slow sweep or ramp from the rest "
+        "motor current (Algorithm 1 of the paper), and write the shifted model.\n\n"
+        "The knob is stepped by --step degrees. The current's level tells the start: no tendon "
+        "taut (the search goes its way) or one taut (it turns and crosses the dead zone to the "
+        "far edge; a current moving back to its no-load level is a tendon unloading, never an "
+        "edge). The edge is where the current's slope jumps out of the dead zone to a loaded one "
+        "(>= eps_lower): offset = edge - D_pos moving +, edge - D_neg moving -. A slope beyond "
+        "eps_upper is a wall: reverse and find the other edge. Every offset carries its "
+        "evidence (the jump's clarity, the edge's standard error); weak evidence is refused "
+        "with the reason (exit 1). Thresholds and levels come from the model's identification "
+        "unless given. The search never exceeds --max-steps / --max-travel and returns the knob "
+        "to where it began.\n\n"
+        "--replay walks a run recorded under the new shape (a slow sweep from the rest "
         "position) as if the knob were stepped; --port runs it live on the robot.\n\n"
         "Example:\n\n"
-        "    hyst detect-shift --model model.json --replay bent.csv -o shifted.json --plot fig5b.png"
+        "    hyst detect-shift --model model.json --replay sample_data/ice-a/replay_alpha90_knob1.csv "
+        "-o shifted.json --plot fig5b.png"
     ),
 )
 def detect_shift_cmd(
@@ -140,6 +151,14 @@ def detect_shift_cmd(
             raise typer.BadParameter(f"must be between 0 and {device.MAX_DWELL:g} s, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
         raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
+    for name, v in (("--eps-lower", eps_lower), ("--eps-upper", eps_upper)):
+        if v is not None and not (math.isfinite(v) and v > 0):
+            raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
+    if eps_lower is not None and eps_upper is not None and not eps_upper > eps_lower:
+        raise typer.BadParameter(f"must be greater than --eps-lower ({eps_lower:g}), got {eps_upper:g}",
+                                 param_hint="--eps-upper")
+    if current_dead_zone is not None and not math.isfinite(current_dead_zone):
+        raise typer.BadParameter(f"must be a finite current, got {current_dead_zone}", param_hint="--current-dead-zone")
     inputs = [model_path] + ([replay] if replay is not None else [])
     # refuse a bad output before anything moves
     check_not_input(output, inputs)
@@ -176,13 +195,15 @@ def detect_shift_cmd(
     else:
         meta["shift_source"] = f"live:{port}"
     shifted = Model(shifted.knobs, shifted.geometry, shifted.effects, meta, shifted.identification)
-    if plot is not None:
-        background = None
-        if run is not None:
-            background = {k: (run[f"q{k}"], run[f"c{k}"]) for k in results}
-        shift_mod.plot_shift(list(results.values()), plot, model=model, background=background,
-                             inputs=inputs)
-    save_model(output, shifted, inputs=inputs)
+    # the model and the figure together or neither
+    with all_or_none() as pending:
+        if plot is not None:
+            background = None
+            if run is not None:
+                background = {k: (run[f"q{k}"], run[f"c{k}"]) for k in results}
+            shift_mod.plot_shift(list(results.values()), pending.path(plot, inputs=inputs), model=model,
+                                 background=background)
+        pending.write_text(output, dumps_model(shifted), inputs=inputs)
     if fmt == OutputFormat.json:
         echo_json({"knobs": {str(k): r.to_dict() for k, r in results.items()},
                    "output": str(output), "plot": None if plot is None else str(plot)})
