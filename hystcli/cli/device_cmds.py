@@ -7,6 +7,7 @@ command that moves a knob checks the whole request against the limits of
 """
 from __future__ import annotations
 
+import math
 import signal
 import sys
 from pathlib import Path
@@ -58,6 +59,11 @@ def sim_robot_cmd(
     fault: Annotated[Optional[List[str]], typer.Option(
         "--fault", help="Inject a fault (tests): KIND@N[xCOUNT][=VALUE], KIND one of silent, garble, "
                         "close, error, spike, delay; N counts MOVE frames.")] = None,
+    zoo: Annotated[Optional[str], typer.Option(
+        "--zoo", metavar="SEED[:FAMILY[:OFFSET]]",
+        help="Serve an independent plant of hystcli.zoo.plants instead of the catheter (knob 1 only): "
+             "its seed, current-law family and the shift its shaft carries (deg). For tests of the "
+             "live path on a plant our code did not make.")] = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Serve the virtual catheter as a robot on a pseudo-terminal until Ctrl-C or SIGTERM.
@@ -98,7 +104,10 @@ def sim_robot_cmd(
         faults = [Fault.parse(f) for f in fault or ()]
     except HystError as exc:
         raise _usage("--fault", exc) from None
-    twin = LiveTwin(cath, shape=shp, rotation=rotation, effects=effs, seed=seed, knobs=knob_list)
+    if zoo is not None:
+        twin = _zoo_plant(zoo)
+    else:
+        twin = LiveTwin(cath, shape=shp, rotation=rotation, effects=effs, seed=seed, knobs=knob_list)
     server = serve(twin, latency=latency_ms / 1000.0, faults=faults, name=name,
                    travel_limit=travel_limit, max_speed=max_speed, background=False)
 
@@ -111,9 +120,9 @@ def sim_robot_cmd(
         # a client may connect and start moving at once
         sys.stdout.write(server.path + "\n")
         sys.stdout.flush()
-        info(f"serving {catheter} ({shp}, rotation {rotation:g} deg, effects "
-             f"{format_effects(twin.effects)}) on {server.path}; "
-             "Ctrl-C to stop", quiet)
+        what = (f"zoo plant {zoo}" if zoo is not None else
+                f"{catheter} ({shp}, rotation {rotation:g} deg, effects {format_effects(twin.effects)})")
+        info(f"serving {what} on {server.path}; Ctrl-C to stop", quiet)
         server.serve_forever()
         if server.closed:
             info("the device port was closed (fault injected)", quiet)
@@ -122,6 +131,25 @@ def sim_robot_cmd(
     finally:
         signal.signal(signal.SIGTERM, previous)
         server.shutdown()
+
+
+def _zoo_plant(text: str) -> Any:
+    """The independent plant ``SEED[:FAMILY[:OFFSET]]`` of :mod:`hystcli.zoo.plants`, bent."""
+    from ..zoo import plants
+
+    parts = text.split(":")
+    try:
+        seed = int(parts[0])
+        family = parts[1] if len(parts) > 1 and parts[1] else None
+        offset = float(parts[2]) if len(parts) > 2 else 0.0
+        if len(parts) > 3 or seed < 0 or not math.isfinite(offset) or (
+                family is not None and family not in plants.FAMILIES):
+            raise ValueError
+    except ValueError:
+        raise typer.BadParameter(f"{text!r}: expected SEED[:FAMILY[:OFFSET]], FAMILY one of "
+                                 f"{', '.join(plants.FAMILIES)}", param_hint="--zoo") from None
+    plant, _ = plants.live_plant(seed, family, offset=offset)
+    return plant
 
 
 @command("sweep", epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "

@@ -1,0 +1,78 @@
+"""`hyst identify` and `hyst detect-shift` through the command line on independent plants
+(issue 10): a small seeded subset of what ``python bench/zoo.py`` runs by the hundred.
+
+The plants (:mod:`hystcli.zoo.plants`) reach the commands as run CSV files, as a user's logs
+would. What must hold on every one: a command that succeeds is right (identify: every parameter
+it gives an uncertainty for within 0.5 deg of the truth; detect-shift: the offset within 0.5 deg
+of the true shift), and one that cannot be right says why in one line and writes nothing.
+"""
+from __future__ import annotations
+
+import json
+import sys
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from hystcli.cli import app
+from hystcli.io import load_model, save_model
+from hystcli.zoo import plants
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
+from zoo import straight_model  # noqa: E402
+
+runner = CliRunner()
+# seeds of the design set (below 5000): the bench's held-out seeds (from 100000) are kept for its
+# figures, never for a test that must pass
+SEEDS = tuple(range(16))
+
+
+def _error_line(res) -> str:
+    lines = [ln for ln in res.stderr.splitlines() if ln.startswith("Error:")]
+    assert len(lines) == 1 and "Traceback" not in res.output, res.output
+    return lines[0]
+
+
+def test_identify_on_independent_plants(tmp_path):
+    ok = 0
+    for seed in SEEDS:
+        case = plants.sweep_case(seed)
+        src = tmp_path / f"sweep{seed}.csv"
+        src.write_text(case.record.csv_text())
+        out = tmp_path / f"m{seed}.json"
+        res = runner.invoke(app, ["identify", str(src), "-o", str(out), "--format", "json", "-q"])
+        if res.exit_code != 0:
+            assert res.exit_code == 1 and not out.exists()
+            _error_line(res)
+            continue
+        fit = json.loads(res.stdout)["1"]
+        truth = case.truth.as_dict()
+        for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+            if name in fit["stderr"]:      # a parameter identify claims
+                assert abs(fit["params"][name] - truth[name]) <= 0.5, (seed, case.family, name)
+        ok += 1
+    # measured on these seeds: 12 of 16 identified, the others refused with the reason
+    assert ok >= 10
+
+
+def test_detect_shift_on_independent_replays(tmp_path):
+    ok = 0
+    for seed in SEEDS:
+        case = plants.replay_case(seed)
+        model, _ = straight_model(case)
+        mp = tmp_path / f"model{seed}.json"
+        save_model(mp, model)
+        rep = tmp_path / f"replay{seed}.csv"
+        rep.write_text(case.replay.csv_text())
+        out = tmp_path / f"shifted{seed}.json"
+        res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(rep), "-o", str(out), "-q"])
+        if res.exit_code != 0:
+            assert res.exit_code == 1 and not out.exists()
+            assert "returned to" in _error_line(res)
+            continue
+        offset = load_model(out).knob(1).offset
+        assert abs(offset - case.offset) <= 0.5, (seed, case.family, offset, case.offset)
+        ok += 1
+    # measured: 8 of 16 offsets (the others: a far edge beyond the travel limit, or weak evidence)
+    assert ok >= 6
