@@ -16,8 +16,11 @@ What counts, per case:
   leaving each backlash plateau), which is the plant's truth, not our estimate.
 * 2-sigma coverage: the share of returned parameters whose truth lies within two standard errors.
 
-Run: ``python bench/zoo.py`` (500 sweeps, about a minute on 2 cores); ``--n``, ``--seed``,
-``--only identify|shift``.
+* **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
+  searched by ``hyst detect-shift --port`` (the first 40 of ``--n``).
+
+Run: ``python bench/zoo.py`` (500 sweeps and 500 replays, several minutes on 2 cores); ``--n``,
+``--seed``, ``--only identify|shift|live``.
 """
 from __future__ import annotations
 
@@ -26,6 +29,7 @@ import math
 import sys
 import time
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
@@ -42,6 +46,8 @@ PARAMS = ("d_pos", "d_neg", "b_pos", "b_neg")
 def truth_can_fix(case: plants.SweepCase) -> tuple[set[str], set[str]]:
     """(parameters the record cannot fix, edges that only slide) on the true loop."""
     tr = case.truth
+    if "y1" not in case.record.columns:
+        case = plants.sweep_case(case.seed, case.family)   # the same plant, its tip recorded
     m = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
                   h_pos=tr.h_pos, h_neg=tr.h_neg)
     col = case.record.columns
@@ -64,10 +70,11 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
         case = plants.sweep_case(s, tip=use_tip)
         fam = case.family
         run = parse_run(case.record.csv_text(), source=f"zoo-{s}")
-        unfixed, sliding = truth_can_fix(case) if use_tip else (set(), set())
-        if not use_tip:
-            if not case.current_shows_backlash:
-                unfixed |= {"b_pos", "b_neg"}
+        # the loop's own limits (edges passed, plateaus left) hold for the current too; a current
+        # that does not carry the backlash cannot give it
+        unfixed, sliding = truth_can_fix(case)
+        if not use_tip and not case.current_shows_backlash:
+            unfixed |= {"b_pos", "b_neg"}
         try:
             fit = identify(run, use_tip=use_tip).fits[1]
         except HystError:
@@ -207,17 +214,55 @@ def bench_shift(n: int, seed: int) -> None:
         print("  silent: " + line)
 
 
+def bench_live(n: int, seed: int) -> None:
+    """The live path: ``hyst sim-robot --zoo`` behind a real pty, ``hyst detect-shift --port``."""
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+    import tempfile
+
+    from simrobot import sim_robot
+    from typer.testing import CliRunner
+
+    from hystcli.cli import app
+    from hystcli.io import load_model, save_model
+
+    runner = CliRunner()
+    counts: dict = defaultdict(int)
+    errs: list[float] = []
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        for s in range(seed, seed + n):
+            case = plants.replay_case(s)
+            model, _ = straight_model(case)
+            mp, out = Path(tmp) / f"m{s}.json", Path(tmp) / f"o{s}.json"
+            save_model(mp, model)
+            with sim_robot("--zoo", f"{s}:{case.family}:{case.offset!r}") as port:
+                res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--port", port, "-o", str(out),
+                                          "--timeout", "10", "-q"])
+            if res.exit_code != 0:
+                counts["refused"] += 1
+                continue
+            e = abs(load_model(out).knob(1).offset - case.offset)
+            errs.append(e)
+            counts["ok" if e <= 0.5 else ("0.5-2 deg" if e <= 2 else "silent > 2 deg")] += 1
+    dt = time.perf_counter() - t0
+    print(f"\nlive detect-shift (sim-robot --zoo over a pty), {n} plants from seed {seed}, {dt:.0f} s: "
+          + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
+          + (f"; median |error| {np.median(errs):.3f} deg, worst {max(errs):.2f}" if errs else ""))
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=500)
     ap.add_argument("--seed", type=int, default=100_000)
-    ap.add_argument("--only", choices=("identify", "shift"), default=None)
+    ap.add_argument("--only", choices=("identify", "shift", "live"), default=None)
     args = ap.parse_args(argv)
     if args.only in (None, "identify"):
         bench_identify(args.n, args.seed, use_tip=True)
         bench_identify(args.n, args.seed, use_tip=False)
     if args.only in (None, "shift"):
         bench_shift(args.n, args.seed)
+    if args.only in (None, "live"):
+        bench_live(min(args.n, 40), args.seed)
     return 0
 
 

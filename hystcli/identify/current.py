@@ -199,6 +199,15 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> float 
     length = sum(lengths[ju:dead])
     if ju == 0 or not (length >= 1.0 and unload * length > 6 * sig):
         return None
+    # the backlash phase must show one of the two signatures a backlash leaves, unambiguously:
+    # the load held (a flat plateau at least a degree long), or the sheath friction flipping
+    # over the plateau's width (a fall at least twice the unloading slope, longer than the
+    # motor's own Coulomb flip at a reversal, which is over within a degree or two)
+    before = range(ju)
+    plateau = any(abs(slopes[k]) <= 0.15 * unload and lengths[k] >= 1.0 for k in before)
+    flip = sum(lengths[k] for k in before if slopes[k] >= 2.0 * unload) >= 2.0
+    if not (plateau or flip):
+        return None
     return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]]))
 
 
@@ -257,14 +266,14 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         if not pl:
             pl = [s.plateau for s in stretches if s.direction == -d and s.plateau is not None]
         arr = np.array(pl)
-        # stretches that disagree (more than a third off the median by over a degree, or 15 %)
-        # show no backlash one can trust
-        tol = max(1.0, 0.15 * abs(float(np.median(arr)))) if arr.size else 1.0
-        if arr.size and np.sum(np.abs(arr - np.median(arr)) > tol) * 3 <= arr.size:
-            arr = arr[np.abs(arr - np.median(arr)) <= tol]
+        # every stretch within 0.5 deg (or 10 %) of their median: a backlash the current shows
+        # the same way after every reversal
+        tol = max(0.5, 0.10 * abs(float(np.median(arr)))) if arr.size else 0.5
+        if arr.size and np.all(np.abs(arr - np.median(arr)) <= tol):
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
-            backlash_se["pos" if d > 0 else "neg"] = (float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size))
-                                                      if arr.size > 1 else 0.25)
+            backlash_se["pos" if d > 0 else "neg"] = max(
+                float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size)) if arr.size > 1 else 0.0,
+                0.5 * float(np.ptp(arr)), 0.1 if arr.size > 1 else 0.3)
     arrivals = {}
     for d in (1, -1):
         arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])
