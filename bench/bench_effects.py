@@ -13,7 +13,7 @@ from hystcli import twin
 from hystcli.io import Run
 from hystcli.model import Model
 
-CAT = twin.get_catheter("ice-a")
+CAT = twin.get_catheter("example-a")
 
 
 def _time(f, n):

@@ -21,7 +21,7 @@ REPEATS = 3
 
 
 def main() -> None:
-    cat = twin.get_catheter("ice-a")
+    cat = twin.get_catheter("example-a")
     amplitude, peak_speed = 40.0, 40.0
     cycles = DURATION_S * (peak_speed / amplitude) / (2 * math.pi)
     t, q = twin.sweep(amplitude=amplitude, cycles=cycles, peak_speed=peak_speed, fs=FS)

@@ -40,7 +40,7 @@ def main() -> None:
     hits = 0
     t0 = time.perf_counter()
     for i, (name, form, params) in enumerate(CASES):
-        cat = twin.get_catheter("ice-a" if i % 2 == 0 else "ice-b")
+        cat = twin.get_catheter("example-a" if i % 2 == 0 else "example-b")
         eff = E.make_effect(name, form, **params)
         base, runs = data_set(cat, [eff], seed=args.seed * 1000 + i)
         d = diagnose(base, runs)

@@ -94,7 +94,7 @@ def main() -> None:
     shrinks = []
     t0 = time.perf_counter()
     for i, names in enumerate(cases):
-        cat = twin.get_catheter("ice-a" if i % 2 == 0 else "ice-b")
+        cat = twin.get_catheter("example-a" if i % 2 == 0 else "example-b")
         effs = [draw_effect(n, rng) for n in names]
         base, runs = data_set(cat, effs, seed=args.seed * 1000 + i)
         d = diagnose(base, runs)

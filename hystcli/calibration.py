@@ -149,7 +149,8 @@ CALIBRATED_NAMES: tuple[str, ...] = tuple(_CALIBRATED)
 def calibrated_catheter(name: str) -> "VirtualCatheter":
     """The virtual catheter ``name`` with the calibrated parameters and default effects.
 
-    Built on :func:`hystcli.twin.get_catheter` (its sensors and motor-current model are kept);
+    Built on the twin's plain catheter of the same letter (:func:`hystcli.twin.get_catheter`,
+    ``example-a`` for ``ice-a``: its sensors and motor-current model are kept);
     the knobs, the geometry and the default effects are replaced by this module's values.
 
     Raises
@@ -163,7 +164,8 @@ def calibrated_catheter(name: str) -> "VirtualCatheter":
         values = _CALIBRATED[name]
     except KeyError:
         raise ModelError(f"unknown virtual catheter {name!r} (known: {', '.join(_CALIBRATED)})") from None
-    return replace(get_catheter(name), knobs=values["knobs"], geometry=values["geometry"],
+    base = get_catheter(name.replace("ice-", "example-"))   # the sensors and the current model
+    return replace(base, name=name, knobs=values["knobs"], geometry=values["geometry"],
                    default_effects=tuple(e.spec() for e in default_effects()))
 
 

@@ -110,18 +110,20 @@ class VirtualCatheter:
                      meta={"catheter": self.name})
 
 
-# The two virtual ICE catheters, like the paper's two. Edges and backlash of the order of the
-# DESIGN.md example; beta_catheter / beta_knob from a 10 Fr shaft (tendons ~1.2 mm off axis) and
-# an 8 mm knob pulley.
+# Two plain virtual catheters with DESIGN.md section 6's example knob (and one like it): fixed
+# reference plants for tests and benches, with no effects by default; beta_catheter / beta_knob
+# from a 10 Fr shaft (tendons ~1.2 mm off axis) and an 8 mm knob pulley. The catheters users
+# simulate and the sample data was recorded on, ice-a and ice-b, are the calibrated ones of
+# hystcli.calibration, built on these sensors and current models.
 CATHETERS: Mapping[str, VirtualCatheter] = MappingProxyType({
-    "ice-a": VirtualCatheter(
-        "ice-a",
+    "example-a": VirtualCatheter(
+        "example-a",
         {1: KnobModel(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2),
          2: KnobModel(d_pos=8.4, d_neg=-9.3, b_pos=5.6, b_neg=6.4, omega=1.40, h_pos=-3.6, h_neg=3.9)},
         Geometry(beta_catheter_mm=1.2, beta_knob_mm=8.0),
     ),
-    "ice-b": VirtualCatheter(
-        "ice-b",
+    "example-b": VirtualCatheter(
+        "example-b",
         {1: KnobModel(d_pos=10.2, d_neg=-9.6, b_pos=6.8, b_neg=6.5, omega=1.50, h_pos=-4.5, h_neg=4.4),
          2: KnobModel(d_pos=9.8, d_neg=-10.4, b_pos=7.1, b_neg=6.6, omega=1.48, h_pos=-4.2, h_neg=4.6)},
         Geometry(beta_catheter_mm=1.3, beta_knob_mm=8.0),

@@ -17,8 +17,8 @@ from hystcli.io import Run, load_model, read_run, save_model, write_run
 from hystcli.model import Model, Shape
 
 runner = CliRunner()
-CAT = twin.get_catheter("ice-a")
-BASE = Model(CAT.knobs, CAT.geometry, meta={"catheter": "ice-a"})
+CAT = twin.get_catheter("example-a")
+BASE = Model(CAT.knobs, CAT.geometry, meta={"catheter": "example-a"})
 T = np.arange(0, 30.0 + 1e-9, 0.02)
 LATENCY = E.make_effect("latency", delay=0.3)
 
@@ -38,9 +38,9 @@ def files(tmp_path_factory):
                             meta={"motion": "periodic" if i < 2 else "nonperiodic", "trial": i + 1})
         paths.append(d / f"run{i}.csv")
         write_run(paths[-1], run)
-    other = twin.simulate(twin.get_catheter("ice-b"), T, {1: 40 * np.sin(0.3 * T)}, seed=9)
+    other = twin.simulate(twin.get_catheter("example-b"), T, {1: 40 * np.sin(0.3 * T)}, seed=9)
     write_run(d / "other.csv", other)
-    write_run(d / "no_y.csv", Run({"t": T, "q1": T}, {"catheter": "ice-a"}))
+    write_run(d / "no_y.csv", Run({"t": T, "q1": T}, {"catheter": "example-a"}))
     write_run(d / "two_knobs.csv", twin.simulate(CAT, T, {1: 30 * np.sin(0.3 * T), 2: 20 * np.sin(0.5 * T)}, seed=4))
     return d, paths
 

@@ -33,7 +33,7 @@ def files(tmp_path):
     r = 30 * np.sin(2 * np.pi * 0.2 * t)
     write_run(tmp_path / "traj.csv", Run({"t": t, "r1": r, "r2": 0.5 * r}, {"motion": "periodic"}))
     ts, q = twin.sweep(fs=200.0)
-    sweep = twin.simulate(twin.get_catheter("ice-a"), ts, {1: q}, seed=3)
+    sweep = twin.simulate(twin.get_catheter("example-a"), ts, {1: q}, seed=3)
     write_run(tmp_path / "sweep.csv", sweep)
     return tmp_path
 

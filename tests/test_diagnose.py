@@ -18,8 +18,8 @@ from hystcli.errors import DataError, ModelError
 from hystcli.io import Run
 from hystcli.model import KnobModel, Model, Shape
 
-CAT = twin.get_catheter("ice-a")
-BASE = Model(CAT.knobs, CAT.geometry, meta={"catheter": "ice-a"})
+CAT = twin.get_catheter("example-a")
+BASE = Model(CAT.knobs, CAT.geometry, meta={"catheter": "example-a"})
 FS = 50.0
 T = np.arange(0, 40.0 + 1e-9, 1 / FS)
 
@@ -94,7 +94,7 @@ def _load_runs(loads, stretch, seed=0):
     truth = Model(CAT.knobs, CAT.geometry, effects=(stretch.spec(),))
     runs = []
     for i, load in enumerate(loads):
-        run = Run({"t": T, "q1": _reference("periodic")[1]}, {"condition": f"{load:g}", "catheter": "ice-a",
+        run = Run({"t": T, "q1": _reference("periodic")[1]}, {"condition": f"{load:g}", "catheter": "example-a",
                                                             "trial": str(i + 1)}, f"load{load:g}")
         y = E.predict(truth, run)[1] + rng.normal(0.0, 0.2, T.size)
         runs.append(Run({**run.columns, "y1": y}, run.meta, run.source))
@@ -183,7 +183,7 @@ def test_bad_inputs_raise_typed_errors_naming_the_problem():
     no_y = Run({c: v for c, v in runs[0].columns.items() if c != "y1"}, runs[0].meta, "a.csv")
     with pytest.raises(DataError, match="a.csv: no measured tip angle y1"):
         diagnose(BASE, [no_y, runs[1]])
-    other = make_runs((), seed=7, catheter=twin.get_catheter("ice-b"))
+    other = make_runs((), seed=7, catheter=twin.get_catheter("example-b"))
     with pytest.raises(DataError, match="different catheters"):
         diagnose(BASE, [runs[0], other[1]])
     with pytest.raises(ModelError, match="no knob 2"):
@@ -191,7 +191,7 @@ def test_bad_inputs_raise_typed_errors_naming_the_problem():
     with pytest.raises(DataError, match="no run has metadata motion"):
         diagnose(BASE, runs, holdout="motion=spiral")
     with pytest.raises(DataError, match="every run matches"):
-        diagnose(BASE, runs, holdout="catheter=ice-a")
+        diagnose(BASE, runs, holdout="catheter=example-a")
     with pytest.raises(DataError, match="key=value"):
         diagnose(BASE, runs, holdout="motion")
     with pytest.raises(ModelError, match="unknown candidate effect 'wobble'"):
@@ -291,7 +291,7 @@ def test_a_compensation_only_run_is_predicted_with_the_shafts_shift():
     # Compensation-Only commands ignore the shift, but the tip still undergoes it: the run must
     # carry the shift in effect (offset1 = the geometry's, paper eqs. 1-4: 1.2/8 * 45 = 6.75 deg
     # on ice-a) so that prediction and diagnosis see the bent shaft, not offset 0
-    cat = twin.get_catheter("ice-a")
+    cat = twin.get_catheter("example-a")
     model = Model(cat.knobs, cat.geometry)
     shape = "alpha=45,theta=0"
     t, r = twin.periodic()

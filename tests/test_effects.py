@@ -15,7 +15,7 @@ from hystcli.errors import DataError, ModelError
 from hystcli.io import Run
 from hystcli.model import EffectSpec, KnobModel, Model, Shape
 
-CAT = twin.get_catheter("ice-a")
+CAT = twin.get_catheter("example-a")
 K1 = CAT.knobs[1]  # d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2
 
 

@@ -18,7 +18,7 @@ from hystcli.cli import app
 from hystcli.io import Run, read_run, save_model, write_run
 from hystcli.model import Model, Shape
 
-CAT = twin.get_catheter("ice-a")
+CAT = twin.get_catheter("example-a")
 T = np.arange(0, 30.0, 0.01)
 Q = {1: 40 * np.sin(2 * np.pi * 0.05 * T) + 10 * np.sin(2 * np.pi * 0.13 * T),
      2: 30 * np.sin(2 * np.pi * 0.08 * T + 0.5)}

@@ -15,7 +15,7 @@ from hystcli.errors import ModelError
 from hystcli.io import load_model, save_model
 from hystcli.model import EffectSpec, Model
 
-CAT = twin.get_catheter("ice-a")
+CAT = twin.get_catheter("example-a")
 FORMS = [(n, f.name) for n, et in E.EFFECTS.items() for f in et.forms]
 
 

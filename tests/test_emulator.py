@@ -19,7 +19,7 @@ from hystcli.emulator import DeviceEmulator, Fault, PtyServer, serve
 from hystcli.errors import DataError, DeviceError, LinkError, SafetyStop
 from hystcli.twin import LiveTwin, get_catheter
 
-CAT = get_catheter("ice-a")
+CAT = get_catheter("example-a")
 
 
 def _twin(**kw):
@@ -60,8 +60,8 @@ def test_path_is_a_terminal(server):
 def test_handshake_gives_identity(device):
     info = device.info
     assert (info.protocol, info.name, info.catheter, info.knobs, info.tracker) == \
-        (1, "hyst-sim", "ice-a", (1, 2), True)
-    assert device.info.as_meta()["device_catheter"] == "ice-a"
+        (1, "hyst-sim", "example-a", (1, 2), True)
+    assert device.info.as_meta()["device_catheter"] == "example-a"
     # the optional features of protocol 1 (docs/protocol.md, "Optional features")
     assert info.features == ("dwell", "mean") and device.supports("mean")
     assert info.as_meta()["device_features"] == "dwell,mean"
@@ -83,7 +83,7 @@ def test_move_state_stop_relay_the_twin(server, device):
 
 
 def test_current_grows_once_the_tendon_is_taut(device):
-    # DESIGN.md section 4 on the twin: ice-a knob 1 dead zone edge d_pos = 9.1 deg (straight
+    # DESIGN.md section 4 on the twin: example-a knob 1 dead zone edge d_pos = 9.1 deg (straight
     # shaft); k_load = 4 mA/deg, so 10 deg past the edge adds ~40 mA (x(1 +- mu)) over no-load
     inside = device.move(1, 2.0, 20.0).current
     device.move(1, 19.0, 20.0)
@@ -245,7 +245,7 @@ def quiet_device():
 
 
 def test_dwell_mean_is_the_settled_current_computed_by_hand(quiet_device):
-    # ice-a knob 1 (twin.CATHETERS): d_pos 9.1 deg, b_pos 6.2 deg; current model no_load 120 mA,
+    # example-a knob 1 (twin.CATHETERS): d_pos 9.1 deg, b_pos 6.2 deg; current model no_load 120 mA,
     # coulomb 6 mA, k_load 4 mA/deg, mu 0.25 (twin.CurrentParams). At rest at 15 deg after a rise
     # from 0 (the friction play saturated at +1 after b/2 = 3.1 deg): tension 4 * (15 - 9.1) =
     # 23.6 mA, current 120 + 23.6 + 0.25 * 23.6 = 149.5 mA.
@@ -277,7 +277,7 @@ def test_mean_window_reaching_into_the_motion_says_where_it_was_measured(quiet_d
 
 
 def test_mean_averages_the_current_noise_down(device):
-    # at rest inside the dead zone (2 deg; ice-a's edges are -8.7 and 9.1) the current is the
+    # at rest inside the dead zone (2 deg; example-a's edges are -8.7 and 9.1) the current is the
     # no-load 120 mA plus noise: 3 mA rms raw at 1 kHz, ~0.6 mA after the 20 Hz filter; a mean
     # over 0.3 s averages ~300 raw samples: ~3/sqrt(300) = 0.17 mA. Readings 0.35 s apart.
     device.move(1, 2.0, 20.0, dwell=0.5)

@@ -72,7 +72,7 @@ def sine_sweep(lo: float, hi: float, cycles: float = 2.0, speed: float = 40.0, f
     return t, mid + amp * np.sin(w * t)
 
 
-ICE_A = twin.get_catheter("ice-a")
+ICE_A = twin.get_catheter("example-a")
 
 
 def ice_a_run(lo: float, hi: float, cycles: float = 2.0) -> Run:

@@ -14,11 +14,11 @@ from hystcli.filters import lowpass
 from hystcli.io import Run
 from hystcli.model import Shape
 
-CAT = twin.get_catheter("ice-a")
+CAT = twin.get_catheter("example-a")
 
 
 def test_unknown_catheter_names_the_known_ones():
-    with pytest.raises(ModelError, match="ice-a, ice-b"):
+    with pytest.raises(ModelError, match="example-a, example-b"):
         twin.get_catheter("ice-z")
 
 
@@ -75,7 +75,7 @@ def test_simulate_records_effects_metadata_that_parses_back():
 def test_periodic_run_of_the_protocol_has_full_metadata():
     run = twin.simulate_motion(CAT, Shape.parse("alpha=90"), "periodic", seed=2, trial=3,
                                effects=(E.make_effect("creep"),))
-    for key, value in {"catheter": "ice-a", "controller": "none", "shape": "alpha=90,theta=0",
+    for key, value in {"catheter": "example-a", "controller": "none", "shape": "alpha=90,theta=0",
                        "motion": "periodic", "trial": "3", "seed": "2",
                        "effects": "creep(fraction=0.2,tau=3)"}.items():
         assert run.meta[key] == value
