@@ -552,8 +552,10 @@ class _Search:
 
     # -- moving -------------------------------------------------------------------------------
     def _step(self) -> None:
-        if self.travel + self.u > self.max_travel + 1e-9:
-            raise _LimitReached(f"the travel limit is {self.max_travel:g} deg")
+        # the limit is on how far from where it began the knob goes, not on the path: the few
+        # steps that read the start state and a turn toward the slack side must not use it up
+        if abs(self.q + self.dir * self.u - self.start) > self.max_travel + 1e-9:
+            raise _LimitReached(f"the travel limit is {self.max_travel:g} deg from the start")
         if self.steps >= self.max_steps:
             raise _LimitReached(f"the step limit is {self.max_steps}")
         target = self.q + self.dir * self.u
@@ -799,10 +801,11 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     step : float
         Unit step :math:`u` (deg).
     max_steps : int, optional
-        Step limit; default ``ceil(max_travel / step)``.
+        Step limit; default ``2 * ceil(max_travel / step) + 6``: room to read the start state, turn
+        toward the slack side and, after a contact, cross to the other side.
     max_travel : float, optional
-        Travel limit of the search (deg of knob, every step counted, the return excluded);
-        default :func:`default_max_travel` (the identification sweep's reach).
+        Travel limit of the search: how far from where it began the knob may go (deg of knob, on
+        either side); default :func:`default_max_travel` (the identification sweep's reach).
     direction : int
         Initial direction (+1 as in the paper, or -1) when no tendon is taut at the start.
     level_margin : float, optional
@@ -837,7 +840,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     if not (math.isfinite(max_travel) and max_travel > 0):
         raise ShiftDetectionError(f"the travel limit must be a positive number of degrees, got {max_travel}")
     if max_steps is None:
-        max_steps = int(math.ceil(max_travel / step - 1e-9))
+        max_steps = 2 * int(math.ceil(max_travel / step - 1e-9)) + 2 * _Search.FIRST
     if int(max_steps) < 1:
         raise ShiftDetectionError(f"the step limit must be at least 1, got {max_steps}")
     if direction not in (1, -1):
