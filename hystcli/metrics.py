@@ -745,6 +745,20 @@ def _controller_colour(name: str, extra: dict[str, str]) -> str:
     return extra[name]
 
 
+PLOT_POINTS = 4000
+"""Samples per drawn line at most: a 420-pixel panel shows no more, and Agg renders 10 000-sample
+lines several times slower."""
+
+
+def _thin(*series: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every k-th sample of each series (the last one kept), so a line has at most PLOT_POINTS."""
+    n = len(series[0])
+    if n <= PLOT_POINTS:
+        return series
+    idx = np.unique(np.r_[np.arange(0, n, int(np.ceil(n / PLOT_POINTS))), n - 1])
+    return tuple(np.asarray(s)[idx] for s in series)
+
+
 def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as file bytes.
 
@@ -781,6 +795,8 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
         col = columns.setdefault((meta["motion"], meta["shape"], k), {})
         col.setdefault(meta["controller"], run)
     order = sorted(columns, key=lambda c: (_rank("motion", c[0]), _rank("shape", c[1]), c[2]))
+    if not order:
+        raise DataError("nothing to draw: no run with a tip column y1 or y2 and its reference")
     motions = {c[0] for c in order}
 
     fig = Figure(figsize=(4.2 * len(order), 7.0), dpi=100)
@@ -794,7 +810,7 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
         top, bottom = axes[0][j], axes[1][j]
         ref = by_ctrl[ctrls[0]]
         # ground truth drawn last and dashed, so a controller that tracks it perfectly hides nothing
-        top.plot(ref.t, ref[f"r{k}"], color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
+        top.plot(*_thin(ref.t, ref[f"r{k}"]), color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
                  label="ground truth (r)")
         lo = min(float(np.min(by_ctrl[c][f"r{k}"])) for c in ctrls)
         hi = max(float(np.max(by_ctrl[c][f"r{k}"])) for c in ctrls)
@@ -804,8 +820,8 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
             run = by_ctrl[c]
             colour = _controller_colour(c, extra)
             label = CONTROLLER_LABELS.get(c, c)
-            top.plot(run.t, run[f"y{k}"], color=colour, lw=1.4, label=label)
-            bottom.plot(run[f"r{k}"], run[f"y{k}"], color=colour, lw=1.4, label=label)
+            top.plot(*_thin(run.t, run[f"y{k}"]), color=colour, lw=1.4, label=label)
+            bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), color=colour, lw=1.4, label=label)
         title = f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else "")
         top.set_title(title, fontsize=9)
         top.set_xlabel("time (s)")
@@ -820,9 +836,15 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     for ax in axes[0]:
         for handle, label in zip(*ax.get_legend_handles_labels()):
             legend.setdefault(label, handle)
-    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=min(len(legend), 5),
+    width, height = fig.get_size_inches()
+    ncol = min(len(legend), 5, max(2, int(width // 2.4)))   # a label is about 2.4 in wide
+    rows = -(-len(legend) // ncol)
+    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=ncol,
                fontsize=8, frameon=False)
-    fig.tight_layout(rect=(0.0, 0.05, 1.0, 1.0))
+    # fixed margins in inches rather than tight_layout, which draws the whole figure once more
+    # just to measure its labels (a second of the demo)
+    fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.15 / width, bottom=(0.75 + 0.2 * rows) / height,
+                        top=1.0 - 0.3 / height, wspace=0.85 / 4.2 / 0.8, hspace=0.65 / 3.0)
     return figure_bytes(fig, fmt)
 
 
