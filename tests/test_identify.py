@@ -245,7 +245,10 @@ def test_never_past_the_dead_zone():
 def test_past_the_dead_zone_but_not_the_backlash():
     # ice-a knob 1: the tip leaves its plateau after the top reversal only from d_pos plus
     # (h_neg - h_pos)/omega = 9.1 + 5.66 = 14.8 deg on
-    with pytest.raises(IdentificationError, match="cannot fix .*b_pos .*top reversal"):
+    # the record is as well explained by a family of loops (every b_pos past the sweep's top, with
+    # d_neg and h_neg trading against it); which member the optimiser lands on depends on the
+    # scipy release, so the message may name more parameters with it, but b_pos always
+    with pytest.raises(IdentificationError, match="cannot fix .*b_pos"):
         identify(ice_a_run(-40, 12))
     # a little beyond is enough, and still accurate
     m = identify(ice_a_run(-40, 17)).fits[1].model
