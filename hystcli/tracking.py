@@ -26,10 +26,10 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from .errors import DataError, ModelError, SafetyStop
+from .errors import DataError, SafetyStop
 from .io import Run
 from .model import Model
-from .safety import DEFAULT_MOVE_SPEED, Limits
+from .safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits
 
 _NAMES = ("t", "r1", "r2")
 
@@ -350,6 +350,11 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
                     emit((q,) if one else q)
         for q in comp.flush():
             emit((q,) if one else q)
+    except LimitExceeded:
+        # the whole file refused before its first MOVE: nothing of the run moved (a shift search
+        # before it has brought its knob back itself)
+        device.stop()
+        raise
     except BaseException as exc:
         device.stop()
         statement = (_return_knobs(device, starts, v_move) if return_on_abort
