@@ -85,11 +85,14 @@ def track_cmd(
     else:
         ref = reference_from_run(io.read_run(reference, require=("t",)))
     lim = limits(travel_limit, max_speed)
-    progress = None
-    if not quiet and stderr_is_tty():
-        def progress(i: int) -> None:
-            if i % 100 == 0:
-                typer.echo(f"\rtracking: {i} samples", err=True, nl=False)
+    tty = not quiet and stderr_is_tty()
+
+    def progress(i: int) -> None:
+        if i == 1:  # the first command reached: the run is under way (what a Ctrl-C now undoes)
+            info(f"tracking {reference}: started at the first command; Ctrl-C stops and returns the knobs",
+                 quiet)
+        elif tty and i % 100 == 0:
+            typer.echo(f"\rtracking: {i} samples", err=True, nl=False)
     with Device(port, baud, timeout) as device:
         info(f"connected to {device.info.name} ({device.info.catheter}, knobs "
              f"{','.join(map(str, device.info.knobs))}, tracker {'yes' if device.info.tracker else 'no'})",
@@ -104,7 +107,7 @@ def track_cmd(
             fail(f"interrupted; {exc}" if str(exc) else "interrupted", 130)
     run = result.run.with_meta(reference=("<stdin>" if reference == "-" else Path(reference).name), port=port)
     io.write_run(output, run, inputs=inputs)
-    if progress is not None:
+    if tty and len(run) >= 100:
         typer.echo("", err=True)
     parts = [f"{len(run)} samples", f"max lag {run.meta['track_max_lag_s']} s",
              f"compensator {result.step_us:.1f} us/step"]
