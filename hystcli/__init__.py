@@ -9,6 +9,8 @@ The Python surface (DESIGN.md section 9)::
     q = k.inverse(r)
     pred = m.predict(run)                     # with the model's effects: what `hyst predict` writes
     cmd = m.compensate(reference).run         # with the model's effects: what `hyst compensate` writes
+    c = hystcli.Compensator(m, dt=0.01)       # streaming, for a robot's own control loop
+    q_t = c.step(r_t)                         # one sample in, one command out, causal
 
 ``import hystcli`` loads only the error classes: every other name is imported on first use
 (module ``__getattr__``), so that ``hyst --help`` and a script that needs one function do not
@@ -26,12 +28,12 @@ __version__ = "0.1.0"
 
 # public name -> submodule that defines it (imported when the name is first asked for)
 _LAZY = {
-    "Run": "io", "load_model": "io", "read_run": "io", "save_model": "io", "write_run": "io",
+    "Compensator": "stream", "Run": "io", "load_model": "io", "read_run": "io", "save_model": "io", "write_run": "io",
     "EffectSpec": "model", "Geometry": "model", "KnobModel": "model", "Model": "model", "Shape": "model",
 }
 
 __all__ = [
-    "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
+    "Compensator", "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
     "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Shape",
     "ShiftDetectionError", "load_model", "read_run", "save_model", "write_run", "__version__",
 ]

@@ -276,6 +276,23 @@ class EffectType:
         stated condition and number of knobs: when not, diagnosis reuses the base prediction."""
         return True
 
+    # -- one sample at a time (the streaming compensator, hystcli/stream.py) --------------------
+    def stepper(self, eff: "Effect", k: int, options: Mapping[str, float], warnings: list[str]) -> Any:
+        """A one-sample inverse of this signal stage, or None when it has none.
+
+        The object has ``step(z, t, other) -> float`` (the signal before the stage that makes it
+        give ``z`` at time ``t``; ``other`` is the other knob's command as the stage reads it, or
+        None), ``reset()``, and ``save()``/``load(state)`` (a coupling's per-sample fixed point
+        tries a sample several times). Stepping a whole run through it gives :meth:`inverse`'s
+        numbers. ``warnings`` collects what the batch inverse would warn about.
+        """
+        return None
+
+    def preview(self, eff: "Effect") -> float:
+        """How far ahead (s) of the sample it returns this stage's inverse reads its target (0: a
+        causal inverse; ``latency`` needs the reference ``delay`` seconds ahead)."""
+        return 0.0
+
 
 @dataclass(frozen=True)
 class Effect:

@@ -44,3 +44,20 @@ class Contact(EffectType):
     def current(eff, free: np.ndarray, tip: np.ndarray, omega: float) -> np.ndarray:
         """Extra motor current (mA) while the wall blocks the tip: stiffness per deg of knob past it."""
         return eff["stiffness"] * np.abs(free - tip) / omega
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    def stepper(self, eff, k, options, warnings):
+        """The target clipped at the wall, one sample at a time (warns once, as :meth:`inverse`)."""
+        from .kernels import StatelessStep
+
+        w = float(eff["wall"])
+        said = []
+
+        def clip(z, other):
+            c = min(z, w) if w > 0 else max(z, w)
+            if c != z and not said:
+                said.append(True)
+                warnings.append(f"knob {k}: the reference passes the wall at {w:g} deg: clipped there")
+            return c
+
+        return StatelessStep(clip)

@@ -87,3 +87,44 @@ class Coupling(EffectType):
 
     def acts_on(self, form, curvature, condition, two_knobs):
         return two_knobs
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    @staticmethod
+    def drive_at(eff, other: float, other_offset: float) -> float:
+        """The other knob's drive D (deg) for one sample of its command."""
+        return abs(other - other_offset) if eff.form.endswith("-magnitude") else other
+
+    def edges_at(self, eff, other: float, other_offset: float) -> tuple[float, float]:
+        """The moves ``(dp, dn)`` of :meth:`edges` for one sample of the other knob's command."""
+        half = 0.5 * eff["gain"] * self.drive_at(eff, other, other_offset)
+        return half, -half
+
+    def stepper(self, eff, k, options, warnings):
+        """:meth:`inverse` one sample at a time; the other knob's offset is the step's attribute
+        ``other_offset`` (a streaming compensator updates it when the shift changes)."""
+        return _CouplingStep(self, eff)
+
+
+class _CouplingStep:
+    __slots__ = ("etype", "eff", "gain", "sign", "other_offset")
+
+    def __init__(self, etype, eff) -> None:
+        self.etype, self.eff = etype, eff
+        self.gain = float(eff["gain"])
+        self.sign = 1.0 if eff.form.startswith("input") else -1.0
+        self.other_offset = 0.0
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, z: float, t: float, other: float | None = None) -> float:
+        if other is None:
+            return z
+        d = self.etype.drive_at(self.eff, other, self.other_offset)
+        return z + self.gain * d if self.sign > 0 else z - self.gain * d
+
+    def save(self) -> tuple:
+        return ()
+
+    def load(self, state: tuple) -> None:
+        pass

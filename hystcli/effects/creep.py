@@ -53,3 +53,8 @@ class Creep(EffectType):
         kernels.partial_unlag_kernel(np.ascontiguousarray(z), t, float(eff["fraction"]), float(eff["tau"]), math.inf,
                                      np.full(3, np.nan) if state is None else state, out)
         return out
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    def stepper(self, eff, k, options, warnings):
+        """The exact inverse, one sample at a time (:meth:`inverse`'s numbers)."""
+        return kernels.UnlagStep(float(eff["fraction"]), float(eff["tau"]), math.inf)

@@ -167,3 +167,148 @@ def sumsq_kernel(r):
     for i in range(r.shape[0]):
         s += r[i] * r[i]
     return s
+
+
+# --------------------------------------------------------------------------------------------
+# one sample at a time, in plain Python floats (the streaming compensator, hystcli/stream.py)
+# --------------------------------------------------------------------------------------------
+# A numba call costs about as much as the whole one-sample arithmetic (its dispatcher boxes the
+# arguments), so a streaming step runs these plain-float mirrors of the kernels above instead.
+# They do the same IEEE operations in the same order, so they give the kernels' numbers; exp()
+# may differ from numba's by an ulp.
+class LagStep:
+    """:func:`lag_kernel` one sample at a time (the forward lag of the other knob's command that
+    the coupling's inverse reads)."""
+
+    __slots__ = ("tau", "z", "tp", "up", "fresh", "_dt", "_e")
+
+    def __init__(self, tau: float) -> None:
+        self.tau = float(tau)
+        self.reset()
+
+    def reset(self) -> None:
+        self.fresh = True
+        self.z = self.tp = self.up = 0.0
+        self._dt = -1.0
+        self._e = 0.0
+
+    def step(self, u: float, t: float, other: float | None = None) -> float:
+        if self.fresh:
+            self.fresh = False
+            self.z, self.tp, self.up = u, t, u
+            return u
+        dt = t - self.tp
+        if dt > 0.0:
+            if dt != self._dt:
+                self._e = math.exp(-dt / self.tau)
+                self._dt = dt
+            lag = self.tau * (u - self.up) / dt
+            self.z = u - lag + self._e * (self.z - self.up + lag)
+        self.tp = t
+        self.up = u
+        return self.z
+
+    def save(self) -> tuple:
+        return (self.fresh, self.z, self.tp, self.up)
+
+    def load(self, s: tuple) -> None:
+        self.fresh, self.z, self.tp, self.up = s
+
+
+class UnlagStep:
+    """:func:`partial_unlag_kernel` one sample at a time: the inverse of
+    ``y = (1 - fraction) u + fraction lag(u, tau)``, the knob's lead limited to ``lead`` deg."""
+
+    __slots__ = ("fraction", "tau", "lead", "u", "z", "tp", "fresh", "_dt", "_e", "_c")
+
+    def __init__(self, fraction: float, tau: float, lead: float) -> None:
+        self.fraction = float(fraction)
+        self.tau = float(tau)
+        self.lead = float(lead)
+        self.reset()
+
+    def reset(self) -> None:
+        self.fresh = True
+        self.u = self.z = self.tp = 0.0
+        self._dt = -1.0
+        self._e = self._c = 0.0
+
+    def step(self, target: float, t: float, other: float | None = None) -> float:
+        if self.fresh:
+            # at rest on the first target (the kernel's NaN state)
+            self.fresh = False
+            self.u = self.z = target
+            self.tp = t
+            return target
+        dt = t - self.tp
+        u = self.u
+        if dt > 0.0:
+            if dt != self._dt:
+                # _lag_affine's e and c depend on dt only: uniform sampling computes them once
+                e = math.exp(-dt / self.tau)
+                self._e, self._c, self._dt = e, (1.0 - e) * self.tau / dt, dt
+            e, c = self._e, self._c
+            f = self.fraction
+            a = 1.0 - c
+            b = c * u + e * (self.z - u)
+            u = (target - f * b) / (1.0 - f + f * a)
+            if u > target + self.lead:
+                u = target + self.lead
+            elif u < target - self.lead:
+                u = target - self.lead
+            self.z = a * u + b
+        self.u = u
+        self.tp = t
+        return u
+
+    def save(self) -> tuple:
+        return (self.fresh, self.u, self.z, self.tp)
+
+    def load(self, s: tuple) -> None:
+        self.fresh, self.u, self.z, self.tp = s
+
+
+class Cascade:
+    """One-sample stages in series (a second-order lag is two first-order ones)."""
+
+    __slots__ = ("steps",)
+
+    def __init__(self, steps) -> None:
+        self.steps = tuple(steps)
+
+    def reset(self) -> None:
+        for s in self.steps:
+            s.reset()
+
+    def step(self, z: float, t: float, other: float | None = None) -> float:
+        for s in self.steps:
+            z = s.step(z, t)
+        return z
+
+    def save(self) -> tuple:
+        return tuple(s.save() for s in self.steps)
+
+    def load(self, state: tuple) -> None:
+        for s, v in zip(self.steps, state):
+            s.load(v)
+
+
+class StatelessStep:
+    """A one-sample stage without state: ``fn(z, other)``."""
+
+    __slots__ = ("fn",)
+
+    def __init__(self, fn) -> None:
+        self.fn = fn
+
+    def reset(self) -> None:
+        pass
+
+    def step(self, z: float, t: float, other: float | None = None) -> float:
+        return self.fn(z, other)
+
+    def save(self) -> tuple:
+        return ()
+
+    def load(self, state: tuple) -> None:
+        pass

@@ -64,3 +64,9 @@ class Latency(EffectType):
         if z.size == 0:
             return z
         return np.interp(t + eff["delay"], t, z)
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    def preview(self, eff):
+        """The inverse reads the target ``delay`` seconds ahead: not causal (a streaming
+        compensator buffers the reference that long, or leaves the delay in)."""
+        return float(eff["delay"])

@@ -84,3 +84,13 @@ class Rate(EffectType):
 
     def new_inverse_state(self, eff):
         return [np.full(3, np.nan) for _ in range(self.order(eff))]
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    def stepper(self, eff, k, options, warnings):
+        """The exact inverse lag(s), one sample at a time (:meth:`inverse`'s numbers)."""
+        lead = float(options["max_lead"])
+        return kernels.Cascade(kernels.UnlagStep(1.0, float(eff["tau"]), lead) for _ in range(self.order(eff)))
+
+    def forward_stepper(self, eff):
+        """The forward lag(s), one sample at a time (:meth:`forward`'s numbers)."""
+        return kernels.Cascade(kernels.LagStep(float(eff["tau"])) for _ in range(self.order(eff)))

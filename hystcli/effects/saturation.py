@@ -85,3 +85,37 @@ class Saturation(EffectType):
             zc = np.clip(z, -reach_neg, reach)
             return np.where(zc >= 0.0, lim * np.arctanh(zc / lim), neg * np.arctanh(zc / neg))
         return lim * np.arctanh(np.clip(z, -reach, reach) / lim)
+
+    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    def stepper(self, eff, k, options, warnings):
+        """The inverse static map, one sample at a time (warns once, as :meth:`inverse`)."""
+        from .kernels import StatelessStep
+
+        lim, neg = self._limits(eff)
+        said = []
+
+        def say(text):
+            if not said:
+                said.append(True)
+                warnings.append(text)
+
+        if eff.form == "hard":
+            def inv(z, other):
+                if z > lim or z < -lim:
+                    say(f"knob {k}: the reference passes the saturation limit {lim:g} deg: clipped there")
+                    return lim if z > lim else -lim
+                return z
+            return StatelessStep(inv)
+        reach, reach_neg = 0.999 * lim, 0.999 * neg
+        text = f"knob {k}: the reference passes 99.9 % of the saturation limit {lim:g} deg: clipped there"
+        asym = eff.form == "asymmetric"
+
+        def inv(z, other):
+            if z > reach or z < -reach_neg:
+                say(text)
+            if asym:
+                zc = min(max(z, -reach_neg), reach)
+                return lim * math.atanh(zc / lim) if zc >= 0.0 else neg * math.atanh(zc / neg)
+            return lim * math.atanh(min(max(z, -reach), reach) / lim)
+
+        return StatelessStep(inv)

@@ -1,0 +1,599 @@
+"""Streaming compensation: the model's inverse chain one reference sample at a time, for a
+robot's own control loop (DESIGN.md section 9, ``hystcli.Compensator``).
+
+:class:`Compensator` runs the same chain as ``hyst compensate`` (:func:`hystcli.effects.inverse`):
+the inverse stages of the model's effects from the sensor back to the input, with the hysteresis
+inverse of DESIGN.md section 3 in the middle, each stage keeping its own state between samples
+(:meth:`hystcli.effects.EffectType.stepper`). Fed the samples of a reference file one by one it
+returns the commands ``hyst compensate`` writes for that file (to float rounding: ``exp`` and
+``atanh`` may differ from the compiled kernels' by an ulp).
+
+What is causal, and what is not:
+
+* the hysteresis inverse, ``rate`` (inverse lags, the knob's lead limited to ``max_lead``),
+  ``creep``, ``saturation``, ``contact`` and the condition effects (``friction``, ``deadzone``,
+  ``stretch``: fixed for a shape/condition) are causal: sample ``i``'s command needs samples
+  ``<= i`` only;
+* ``coupling`` reads the other knob's command of the same sample: solved per sample by the same
+  fixed-point iteration the batch inverse runs over the whole run (so a two-knob step costs up to
+  ``iterations`` passes over the coupled stages);
+* ``latency`` (the tracker reports the tip ``delay`` s late) has no causal exact inverse: to make
+  the *reported* tip follow ``r`` the command at ``t`` must aim at ``r(t + delay)``. The default
+  (``latency="delay"``) buffers ``lookahead = ceil(delay / dt)`` samples: :meth:`Compensator.step`
+  then returns the command of the sample ``lookahead`` steps back (the first ``lookahead`` calls
+  return the knob's rest command) and :meth:`Compensator.flush` returns the last ones; these are
+  exactly the commands ``hyst compensate`` writes. A caller that knows its reference ahead (a
+  planned trajectory) feeds it ``lookahead`` samples early and loses nothing; a caller that does
+  not gets its commands that much late. ``latency="ignore"`` leaves the delay in (no lookahead):
+  the physical tip follows ``r`` and only the tracker's report lags, by ``delay``.
+
+Time: the time-driven stages (``rate``, ``creep``, ``latency``) need each sample's time: pass
+``t`` to :meth:`Compensator.step`, or give the sample period ``dt`` once (sample ``i`` is then at
+``i * dt``).
+
+Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation but the returned
+float or pair); :meth:`Compensator.steps` runs a knob without effects through the compiled kernel
+of :mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
+"""
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from .effects import chain
+from .effects.base import Effect, Signals
+from .effects.registry import as_effects
+from .errors import DataError, ModelError
+from .model import KnobModel, Model, Shape, _inverse_py, _kernel
+
+LATENCY_MODES = ("delay", "ignore")
+"""What a :class:`Compensator` does with a ``latency`` effect (see the module's notes)."""
+
+
+class _Hysteresis:
+    """The hysteresis inverse of DESIGN.md section 3, one sample at a time (``_inverse_py`` and
+    ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
+
+    __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
+                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "other_offset")
+    # (other_offset: the other knob's offset, the zero of a coupling driven by its bend's size)
+
+    def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect]) -> None:
+        self.k = k
+        self.edges = tuple(edges)          # coupling that moves the dead zone (reads the other knob)
+        self.outputs = tuple(outputs)      # output stages: where the hysteresis starts behind a reading
+        self.other_offset = 0.0
+        self.y0 = 0.0
+        self.set_knob(kn)
+        self.reset(0.0)
+
+    def set_knob(self, kn: KnobModel) -> None:
+        self.kn = kn
+        (self.offset, self.d_pos, self.d_neg, self.dhat_pos, self.dhat_neg, self.omega, self.h_pos,
+         self.h_neg) = kn._kernel_args()
+
+    def reset(self, y0: float) -> None:
+        self.fresh = True
+        self.y0 = float(y0)
+        self.y = self.x = 0.0
+
+    def _start(self, other: float | None) -> None:
+        # the hysteresis state behind the tip reading y0 at rest, as the batch inverse starts it
+        other_arr = None if other is None else np.array([other])
+        sig = Signals(self.k, None, other_arr, self.other_offset, 0.0, "stream")
+        yh0 = self.y0
+        for e in reversed(self.outputs):
+            yh0 = e.type.at_rest(e, yh0, sig)
+        self.y = yh0
+        self.x = self.kn.holding_knob_angle(yh0)
+        self.fresh = False
+
+    def step(self, r: float, t: float, other: float | None = None) -> float:
+        if self.fresh:
+            self._start(other)
+        y = self.y
+        if r > y:
+            b = a = 0.0
+            if other is not None:
+                for e in self.edges:
+                    dp, dn = e.type.edges_at(e, other, self.other_offset)
+                    b += dp
+                    a += dn
+            if r > self.h_pos:
+                self.x = self.d_pos + b + (r - self.h_pos) / self.omega + self.offset
+            else:
+                self.x = self.dhat_pos + a + (r - self.h_pos) / self.omega + self.offset
+            self.y = r
+        elif r < y:
+            b = a = 0.0
+            if other is not None:
+                for e in self.edges:
+                    dp, dn = e.type.edges_at(e, other, self.other_offset)
+                    b += dp
+                    a += dn
+            if r < self.h_neg:
+                self.x = self.d_neg + a + (r - self.h_neg) / self.omega + self.offset
+            else:
+                self.x = self.dhat_neg + b + (r - self.h_neg) / self.omega + self.offset
+            self.y = r
+        return self.x
+
+    def save(self) -> tuple:
+        return (self.fresh, self.y, self.x)
+
+    def load(self, s: tuple) -> None:
+        self.fresh, self.y, self.x = s
+
+    @property
+    def plain(self) -> bool:
+        """True when the compiled kernel of :mod:`hystcli.model` gives this stage's numbers."""
+        return not self.edges
+
+
+class _Knob:
+    """One knob's inverse chain: the steps before the first one that reads the other knob
+    (``head``), then the rest (``tail``), and what the other knob looks like to it (``seen``)."""
+
+    __slots__ = ("k", "head", "tail", "hyst", "seen")
+
+    def __init__(self, k: int, head: list, tail: list, hyst: _Hysteresis, seen: list) -> None:
+        self.k = k
+        self.head = head
+        self.tail = tail
+        self.hyst = hyst
+        self.seen = seen          # forward steps of this knob's command as the other knob's coupling sees it
+
+    def run(self, z: float, t: float, other: float | None) -> float:
+        for s in self.head:
+            z = s.step(z, t, None)
+        for s in self.tail:
+            z = s.step(z, t, other)
+        return z
+
+    def save_tail(self) -> tuple:
+        return tuple(s.save() for s in self.tail)
+
+    def load_tail(self, state: tuple) -> None:
+        for s, v in zip(self.tail, state):
+            s.load(v)
+
+    def reset(self, y0: float) -> None:
+        for s in self.head + self.tail + self.seen:
+            if s is self.hyst:
+                s.reset(y0)
+            else:
+                s.reset()
+
+
+class Compensator:
+    """Streaming compensation: one desired tip angle in, one knob command out, causal.
+
+    Parameters
+    ----------
+    model : Model
+        The catheter's model with its effects; each knob's ``offset`` is the shift in effect
+        (``Model.with_offsets``, or a model ``hyst detect-shift`` wrote).
+    knobs : sequence of int, optional
+        Knobs to compensate (default: every knob of the model). With one knob :meth:`step`
+        takes and returns floats, with two it takes and returns pairs ``(knob 1, knob 2)``.
+    dt : float, optional
+        Sample period (s): sample ``i`` is at ``i * dt`` when :meth:`step` gets no ``t``.
+        Needed with ``latency="delay"`` (the lookahead in samples).
+    shape : Shape or str, optional
+        The shaft's shape, the condition of ``friction``/``deadzone`` (default: straight).
+    condition : float, optional
+        A stated load in place of the shape's curvature (``stretch``; DESIGN.md section 6).
+    latency : {"delay", "ignore"}
+        With a ``latency`` effect: return exact commands ``lookahead`` samples late, or leave the
+        tracker's delay uncompensated (module notes).
+    max_lead : float
+        Largest lead (deg) of a command over the lagged signal it aims at (``rate``), as
+        ``hyst compensate``.
+    iterations : int
+        Most fixed-point passes per sample for ``coupling`` (two knobs).
+
+    Raises
+    ------
+    ModelError
+        An unknown knob, an invalid effect, an effect without a one-sample inverse, a latency
+        mode that is not one of :data:`LATENCY_MODES`, or ``latency="delay"`` without ``dt``.
+
+    Examples
+    --------
+    >>> c = Compensator(hystcli.load_model("shifted.json"), knobs=[1], dt=0.01)   # doctest: +SKIP
+    >>> for r in reference:                                                        # doctest: +SKIP
+    ...     robot.move(1, c.step(r))
+    """
+
+    def __init__(self, model: Model, knobs: Sequence[int] | None = None, *, dt: float | None = None,
+                 shape: Shape | str | None = None, condition: float | None = None,
+                 latency: str = "delay", max_lead: float = 30.0, iterations: int = 50) -> None:
+        self._model = model
+        self._knobs = tuple(int(k) for k in (model.knobs if knobs is None else knobs))
+        if not self._knobs or len(set(self._knobs)) != len(self._knobs):
+            raise ModelError(f"a compensator needs distinct knobs, got {self._knobs}")
+        for k in self._knobs:
+            model.knob(k)
+        if latency not in LATENCY_MODES:
+            raise ModelError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
+        if dt is not None and not (math.isfinite(dt) and dt > 0):
+            raise ModelError(f"the sample period dt must be a positive number of seconds, got {dt!r}")
+        self.dt = None if dt is None else float(dt)
+        self.shape = shape if isinstance(shape, Shape) else Shape.parse(shape)
+        self.condition = None if condition is None else float(condition)
+        self.latency = latency
+        self.iterations = max(int(iterations), 1)
+        self._effects = as_effects(model.effects)
+        self._plan = chain.Plan.of(self._effects)
+        self._warnings: list[str] = []
+        opts = {"max_lead": float(max_lead)}
+        two = len(self._knobs) == 2
+
+        # the reverse steps of the batch inverse (chain._reverse_steps), minus the tracker delay,
+        # which is a buffer of the reference here (it needs future samples)
+        steps = chain._reverse_steps(self._plan)
+        self.delay_s = 0.0
+        kept = []
+        for kind, e in steps:
+            if kind == "sig" and e.type.preview(e) > 0.0:
+                self.delay_s = max(self.delay_s, e.type.preview(e))
+                continue
+            kept.append((kind, e))
+        cut = next((i for i, (kind, e) in enumerate(kept) if two and chain._needs_other(kind, e, self._plan)),
+                   len(kept))
+        # the other knob as the cross-talk sees it: through the input lags before the first stage
+        # that reads the other knob (chain.inverse's `seen`)
+        pre = []
+        for e in self._plan.input:
+            if e.type.cross_knob(e):
+                break
+            pre.append(e)
+        self._chains: dict[int, _Knob] = {}
+        for k in self._knobs:
+            hyst = _Hysteresis(model.knob(k), k, [e for e in self._plan.edges if e.type.cross_knob(e)],
+                               self._plan.output)
+            made = []
+            for kind, e in kept:
+                if kind == "hyst":
+                    made.append(hyst)
+                    continue
+                s = e.type.stepper(e, k, opts, self._warnings)
+                if s is None:
+                    raise ModelError(f"effect {e.label()} has no one-sample inverse: the streaming "
+                                     "compensator cannot run it (use `hyst compensate` on a whole file)")
+                made.append(s)
+            seen = []
+            if two and cut < len(kept):
+                for e in pre:
+                    fs = getattr(e.type, "forward_stepper", None)
+                    if fs is None:
+                        raise ModelError(f"effect {e.label()} has no one-sample forward stage: the "
+                                         "streaming compensator cannot run it with a coupling")
+                    seen.append(fs(e))
+            self._chains[k] = _Knob(k, made[:cut], made[cut:], hyst, seen)
+        self._coupled = two and cut < len(kept)
+        # the time-driven stages (lags, creep, the tracker delay) need each sample's time
+        self._needs_t = any(e.type.driver in ("speed", "time") for e in self._effects if not e.is_null)
+        if self.delay_s > 0.0 and latency == "delay":
+            if self.dt is None:
+                raise ModelError(f"the model's latency ({self.delay_s:g} s) needs the sample period dt "
+                                 "to buffer the reference (or latency='ignore')")
+            ratio = self.delay_s / self.dt
+            # ceil, but a ratio within rounding of an integer is that integer
+            self.lookahead = int(round(ratio)) if abs(ratio - round(ratio)) < 1e-9 else int(math.ceil(ratio))
+        else:
+            self.lookahead = 0
+        n = self.lookahead + 1
+        self._buf_t = [0.0] * n
+        self._buf_r = [[0.0] * n for _ in self._knobs]
+        self._refresh()
+        self.reset()
+
+    # -- construction helpers --------------------------------------------------------------------
+    @classmethod
+    def for_run(cls, model: Model, meta: Mapping[str, str], knobs: Sequence[int] | None = None,
+                offsets: Mapping[int, float] | None = None, **kwargs: Any) -> "Compensator":
+        """The compensator ``hyst compensate`` would use for a reference with metadata ``meta``:
+        each knob's offset by DESIGN.md section 6's rule (:meth:`Model.offsets_for`) unless
+        ``offsets`` are given, the shape and the stated condition from ``meta``."""
+        offs = model.offsets_for(meta) if offsets is None else dict(offsets)
+        return cls(model.with_offsets(offs), knobs, shape=Shape.parse(meta.get("shape")),
+                   condition=chain.run_condition(meta, "reference"), **kwargs)
+
+    # -- state -------------------------------------------------------------------------------------
+    @property
+    def knobs(self) -> tuple[int, ...]:
+        """The knobs compensated, in the order :meth:`step` takes and returns them."""
+        return self._knobs
+
+    @property
+    def model(self) -> Model:
+        """The model with the offsets in effect now."""
+        return self._model
+
+    @property
+    def offsets(self) -> dict[int, float]:
+        """The offset (shift) of every knob of the model now (deg)."""
+        return {k: kn.offset for k, kn in self._model.knobs.items()}
+
+    @property
+    def warnings(self) -> tuple[str, ...]:
+        """What the inverse warned about so far (a target beyond a wall or a saturation), once each."""
+        return tuple(dict.fromkeys(self._warnings))
+
+    @property
+    def rest_command(self) -> tuple[float, ...]:
+        """Per knob, the command while the reference rests at the tip reading it started from (the
+        middle of the knob range that holds it): what :meth:`step` returns while the latency
+        buffer fills."""
+        return tuple(self._chains[k].hyst.kn.holding_knob_angle(self._rest_y[i])
+                     for i, k in enumerate(self._knobs))
+
+    def reset(self, y0: float | Sequence[float] = 0.0) -> None:
+        """Start again: the tip reads ``y0`` (deg; a pair for two knobs) at rest, every lag at rest,
+        the latency buffer empty, the clock at 0. ``hyst compensate`` starts from 0."""
+        ys = self._per_knob(y0, "y0", broadcast=True)
+        self._rest_y = ys
+        for i, k in enumerate(self._knobs):
+            self._chains[k].reset(ys[i])
+        self._n = 0          # samples taken
+        self._last_t = -math.inf
+        self._filled = 0     # samples in the latency buffer
+        self._rest = self.rest_command
+
+    def set_offset(self, k: int, offset: float) -> None:
+        """Set knob ``k``'s offset (absolute, deg) between two steps, e.g. after a new Algorithm 1
+        result (``Model.with_offsets``). The chain's state (where the tip is, the lags) is kept:
+        the next command follows the shifted loop from the present tip."""
+        offset = float(offset)
+        if not math.isfinite(offset):
+            raise ModelError(f"offset of knob {k} must be finite, got {offset!r}")
+        self._model.knob(k)
+        self._model = self._model.with_offsets({int(k): offset})
+        self._refresh()
+
+    def rotate(self, delta_deg: float) -> None:
+        """A bulk rotation of the catheter body by ``delta_deg`` (deg) between two steps: rotates
+        the offsets' vector by ``-delta_deg`` (``Model.rotated``, DESIGN.md section 3)."""
+        delta = float(delta_deg)
+        if not math.isfinite(delta):
+            raise ModelError(f"rotation must be finite, got {delta_deg!r}")
+        self._model = self._model.rotated(delta)
+        self._refresh()
+
+    def _refresh(self) -> None:
+        # the knob parameters under the shape/condition with the offsets now; the coupling's zero
+        offs = self.offsets
+        for k, ch in self._chains.items():
+            kn = chain.condition_knob(self._model.knob(k), self._plan, self.shape, self.condition)
+            ch.hyst.set_knob(kn)
+            oo = float(offs.get(3 - k, 0.0))
+            ch.hyst.other_offset = oo
+            for s in ch.head + ch.tail:
+                if hasattr(s, "other_offset"):
+                    s.other_offset = oo
+
+    def _per_knob(self, value: Any, what: str, broadcast: bool = False) -> list[float]:
+        n = len(self._knobs)
+        if (n == 1 or broadcast) and not isinstance(value, (tuple, list, np.ndarray)):
+            return [float(value)] * n
+        vals = [float(v) for v in (value if isinstance(value, (tuple, list, np.ndarray)) else (value,))]
+        if len(vals) != n:
+            raise DataError(f"{what}: expected {n} value{'s' if n > 1 else ''} (knobs "
+                            f"{', '.join(map(str, self._knobs))}), got {len(vals)}")
+        return vals
+
+    # -- the stream ---------------------------------------------------------------------------------
+    def _time(self, t: float | None) -> float:
+        if t is None:
+            if self.dt is None:
+                if self._needs_t:
+                    raise DataError(f"sample {self._n}: the model's time-driven effects need the "
+                                    "sample's time t (or a sample period dt)")
+                return float(self._n)  # read by no stage
+            return self._n * self.dt
+        t = float(t)
+        if not t > self._last_t:  # also refuses NaN
+            raise DataError(f"sample {self._n}: time {t!r} must be after the previous sample's "
+                            f"({self._last_t!r})")
+        return t
+
+    def _command(self, rs: list[float], t: float) -> tuple[float, ...]:
+        # one sample (after the latency buffer) through every knob's chain
+        if not self._coupled:
+            return tuple(self._chains[k].run(rs[i], t, None) for i, k in enumerate(self._knobs))
+        c1, c2 = self._chains[self._knobs[0]], self._chains[self._knobs[1]]
+        # the head (stages that read no other knob) once; then the tail solved for both knobs by
+        # the batch inverse's fixed-point iteration, restarted from this sample's state each pass
+        h1 = h2 = 0.0
+        for i, ch in enumerate((c1, c2)):
+            z = rs[i]
+            for s in ch.head:
+                z = s.step(z, t, None)
+            if i == 0:
+                h1 = z
+            else:
+                h2 = z
+        s1, s2 = c1.save_tail(), c2.save_tail()
+        seen1 = tuple(s.save() for s in c1.seen)
+        seen2 = tuple(s.save() for s in c2.seen)
+
+        def tail(ch, state, h, other):
+            ch.load_tail(state)
+            for s in ch.tail:
+                h = s.step(h, t, other)
+            return h
+
+        def see(ch, state, q):
+            for s, v in zip(ch.seen, state):
+                s.load(v)
+            for s in ch.seen:
+                q = s.step(q, t)
+            return q
+
+        q1 = tail(c1, s1, h1, None)
+        q2 = tail(c2, s2, h2, None)
+        for _ in range(self.iterations):
+            n1 = tail(c1, s1, h1, see(c2, seen2, q2))
+            n2 = tail(c2, s2, h2, see(c1, seen1, q1))
+            change = max(abs(n1 - q1), abs(n2 - q2))
+            q1, q2 = n1, n2
+            if change < 1e-10:
+                break
+        else:
+            self._warnings.append("the coupling's per-sample fixed point did not converge: the last "
+                                  "iterate is used")
+        # commit what the other knob's coupling saw of each command this sample
+        see(c1, seen1, q1)
+        see(c2, seen2, q2)
+        return (q1, q2)
+
+    def step(self, r: float | Sequence[float], t: float | None = None) -> float | tuple[float, float]:
+        """One reference sample in, one command out.
+
+        Parameters
+        ----------
+        r : float or pair of float
+            Desired tip angle(s) (deg), one per knob of :attr:`knobs`.
+        t : float, optional
+            The sample's time (s), increasing; default ``i * dt``.
+
+        Returns
+        -------
+        float or tuple of float
+            The knob command(s) (deg). With a ``lookahead`` (latency), the command of the sample
+            ``lookahead`` steps back (the rest command until the buffer holds that many).
+
+        Raises
+        ------
+        DataError
+            A non-finite reference, a time not after the previous one, the wrong number of values.
+        """
+        if len(self._knobs) == 1 and not self.lookahead and not isinstance(r, (tuple, list, np.ndarray)):
+            # the hot path of one knob: no list, no tuple
+            r = float(r)
+            if not math.isfinite(r):
+                raise DataError(f"sample {self._n}: reference {r!r} is not a finite number")
+            tt = self._time(t)
+            self._last_t = tt
+            self._n += 1
+            return self._chains[self._knobs[0]].run(r, tt, None)
+        rs = self._per_knob(r, f"sample {self._n}")
+        for v in rs:
+            if not math.isfinite(v):
+                raise DataError(f"sample {self._n}: reference {v!r} is not a finite number")
+        tt = self._time(t)
+        self._last_t = tt
+        self._n += 1
+        if self.lookahead:
+            out = self._push(tt, rs)
+            if out is None:
+                q = self._rest
+            else:
+                q = self._command(*out)
+        else:
+            q = self._command(rs, tt)
+        return q[0] if len(q) == 1 else q
+
+    # the latency buffer: the last lookahead + 1 samples, a ring
+    def _push(self, t: float, rs: list[float]) -> tuple[list[float], float] | None:
+        n = self.lookahead + 1
+        j = (self._n - 1) % n
+        self._buf_t[j] = t
+        for i, v in enumerate(rs):
+            self._buf_r[i][j] = v
+        self._filled += 1
+        if self._filled <= self.lookahead:
+            return None
+        return self._aim(self._n - 1 - self.lookahead, self._n - 1)
+
+    def _aim(self, i: int, last: int) -> tuple[list[float], float]:
+        # the reference at t_i + delay by linear interpolation over the buffered samples i..last
+        # (np.interp's formula), held at the last one beyond it
+        n = self.lookahead + 1
+        ti = self._buf_t[i % n]
+        x = ti + self.delay_s
+        out = []
+        for buf in self._buf_r:
+            value = buf[last % n]
+            for j in range(i, last):
+                a, b = self._buf_t[j % n], self._buf_t[(j + 1) % n]
+                if a <= x < b:
+                    fa, fb = buf[j % n], buf[(j + 1) % n]
+                    value = (fb - fa) / (b - a) * (x - a) + fa if x != a else fa
+                    break
+            out.append(value)
+        return out, ti
+
+    def flush(self) -> list:
+        """The commands still in the latency buffer (the reference held at its last sample, as
+        ``hyst compensate`` holds it at the end of a file): call once after the last :meth:`step`.
+        Empty without a lookahead. Each item as :meth:`step` returns it."""
+        if not self.lookahead or self._filled == 0:
+            return []
+        last = self._n - 1
+        first = max(self._n - self.lookahead, 0)
+        out = []
+        for i in range(first, self._n):
+            rs, ti = self._aim(i, last)
+            q = self._command(rs, ti)
+            out.append(q[0] if len(q) == 1 else q)
+        self._filled = 0
+        return out
+
+    def steps(self, r: Any, t: Any = None) -> np.ndarray:
+        """A block of samples: the same as :meth:`step` in a loop, as one array.
+
+        Parameters
+        ----------
+        r : array_like, shape (n,) or (n, 2)
+            Desired tip angles, one column per knob of :attr:`knobs`.
+        t : array_like, shape (n,), optional
+            Sample times (default ``i * dt``).
+
+        Returns
+        -------
+        numpy.ndarray
+            Commands of the same shape (with a lookahead, shifted as :meth:`step` shifts them).
+        """
+        rr = np.asarray(r, dtype=np.float64)
+        nk = len(self._knobs)
+        if (nk == 1 and rr.ndim != 1) or (nk == 2 and (rr.ndim != 2 or rr.shape[1] != 2)):
+            raise DataError(f"steps expects shape (n,) for one knob or (n, 2) for two, got {rr.shape}")
+        tt = None if t is None else np.asarray(t, dtype=np.float64)
+        if tt is not None and tt.shape != (rr.shape[0],):
+            raise DataError(f"steps: t has shape {tt.shape}, r has {rr.shape[0]} samples")
+        if nk == 1 and not self.lookahead and rr.size:
+            ch = self._chains[self._knobs[0]]
+            if not ch.tail and ch.head == [ch.hyst] and ch.hyst.plain and np.all(np.isfinite(rr)):
+                # the compiled kernel of hystcli.model: the same operations, so the same numbers
+                if tt is not None:
+                    self._check_times(tt)
+                h = ch.hyst
+                if h.fresh:
+                    h._start(None)
+                out = np.empty_like(rr)
+                h.y = float(_kernel(_inverse_py)(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
+                h.x = float(out[-1])
+                self._n += rr.size
+                self._last_t = float(tt[-1]) if tt is not None else (
+                    (self._n - 1) * self.dt if self.dt is not None else float(self._n - 1))
+                return out
+        out = np.empty_like(rr)
+        step = self.step
+        if nk == 1:
+            for i in range(rr.shape[0]):
+                out[i] = step(rr[i], None if tt is None else tt[i])
+        else:
+            for i in range(rr.shape[0]):
+                out[i] = step((rr[i, 0], rr[i, 1]), None if tt is None else tt[i])
+        return out
+
+    def _check_times(self, tt: np.ndarray) -> None:
+        if not np.all(np.isfinite(tt)) or (tt.size > 1 and np.any(np.diff(tt) <= 0)) or not tt[0] > self._last_t:
+            raise DataError("steps: t must be finite and strictly increasing, after the previous sample")
+
+
+__all__ = ["Compensator", "LATENCY_MODES"]
