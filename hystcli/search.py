@@ -46,6 +46,8 @@ class Prep:
     offsets: Mapping[int, float]
     shape: Shape
     condition: float | None
+    shape_stated: bool = False
+    """The run states its shape: effects of the shape read its curvature beside a stated condition."""
 
     @property
     def n(self) -> int:
@@ -60,11 +62,13 @@ class Prep:
                        self.name)
 
     def acts(self, etype: EffectType, form: Form) -> bool:
-        return etype.acts_on(form, self.shape.total_curvature, self.condition, self.two_knobs)
+        cond = None if (self.shape_stated and etype.driver == "shape") else self.condition
+        return etype.acts_on(form, self.shape.total_curvature, cond, self.two_knobs)
 
     def trace(self, effects: Sequence[E.Effect], k: int) -> E.KnobTrace:
         return E.tip_chain(self.knobs[k], k, self.q, self.t, effects, self.shape, float(self.y[k][0]),
-                           condition=self.condition, other_offset=self.offsets.get(3 - k, 0.0), source=self.name)
+                           condition=self.condition, other_offset=self.offsets.get(3 - k, 0.0), source=self.name,
+                           shape_stated=self.shape_stated)
 
     def predict(self, effects: Sequence[E.Effect]) -> dict[int, np.ndarray]:
         out = {}
@@ -102,7 +106,7 @@ def prepare(model: Model, run: Run, name: str, decimate: bool) -> Prep:
     return Prep(name, run.meta, np.ascontiguousarray(t[sl]), q,
                 {k: np.ascontiguousarray(run[f"y{k}"][sl], dtype=np.float64) for k in knobs},
                 {k: model.knob(k).with_offset(offsets[k]) for k in knobs}, dict(offsets),
-                Shape.parse(run.meta.get("shape")), E.run_condition(run.meta, name))
+                Shape.parse(run.meta.get("shape")), E.run_condition(run.meta, name), "shape" in run.meta)
 
 
 def wsse(preps: Sequence[Prep], w: np.ndarray, effs: Sequence[E.Effect]) -> float:
@@ -189,7 +193,7 @@ def _sse_from_cut(p: Prep, base: tuple, eff: E.Effect, cuts: dict) -> float:
     for k, kn in p.knobs.items():
         sig = p.signals(k)
         if eff.spec_form.stage == "condition":
-            knc = E.condition_knob(kn, plan, p.shape, p.condition)
+            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
             c = E.run_signals(plan, knc, sig, p.q[k])
         else:
             key = (eff.form, k)
@@ -198,7 +202,7 @@ def _sse_from_cut(p: Prep, base: tuple, eff: E.Effect, cuts: dict) -> float:
                 if type(eff.type).at_rest is not EffectType.at_rest:
                     # its static map sets the hysteresis' start: reuse only what comes before it
                     j = min(j, [s for s, _ in plan.signal_steps()].index("hyst"))
-                knc = E.condition_knob(kn, plan, p.shape, p.condition)
+                knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
                 cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j))
             j, knc, carry = cuts[key]
             c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry)
