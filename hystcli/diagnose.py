@@ -808,15 +808,17 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
             # two starts, each fitted on the fold's training runs alone, the better kept: the
             # fold's own grid picks, and the all-run fit (a start only: a coarse grid can put a
             # small gain on the wrong side of a local minimum the all-run fit has left). Folds that
-            # start from the same point share its residuals and their Jacobian.
-            best = (math.inf, None)
+            # start from the same point share its residuals and their Jacobian. Only the start
+            # with the better training fit is refined (4 frozen Gauss-Newton steps rarely change
+            # which of two starts ends better, and each costs a Jacobian over every training run).
+            starts = []
             for start in (fold_starts[f], chosen):
                 key = tuple((et.name, fm, tuple(sorted(p.items()))) for et, fm, p in start)
-                fitted, sse, shared[key] = S.fit(fit, wt, base, start, iterations=4, res=shared.get(key),
-                                                  frozen=True)
-                if sse < best[0]:
-                    best = (sse, fitted)
-            effs = _effects(base, best[1])
+                _, sse0, shared[key] = S.fit(fit, wt, base, start, iterations=0, res=shared.get(key))
+                starts.append((sse0, key, start))
+            sse0, key, start = min(starts, key=lambda x: x[0])
+            fitted, _, shared[key] = S.fit(fit, wt, base, start, iterations=4, res=shared[key], frozen=True)
+            effs = _effects(base, fitted)
         else:
             effs = tuple(base)
         for i in test:

@@ -170,42 +170,47 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
     """
     T = np.empty((len(preps), len(grid)))
     base = tuple(base)
+    # per grid point once, not per run: whether it is off, its chain plan and that plan's steps
+    # (thousands of points times tens of runs: the bookkeeping cost more than the kernels)
+    null = [_is_null(etype, g) for g in grid]
+    plans = [None if o or g.effect is None else E.Plan.of(base + (g.effect,)) for o, g in zip(null, grid)]
+    steps = [None if pl is None else pl.signal_steps() for pl in plans]
+    acts = acting(preps, etype, grid)
     for i, p in enumerate(preps):
         cuts: dict[str, tuple] = {}
+        sigs = {k: p.signals(k) for k in p.knobs}
         for j, g in enumerate(grid):
-            form = etype.get_form(g.form)
-            if _is_null(etype, g) or not p.acts(etype, form):
+            if null[j] or not acts[i, j]:
                 T[i, j] = base_sse[i]
                 continue
+            if g.effect is None:
+                T[i, j] = math.inf  # outside the domain
+                continue
             try:
-                if g.effect is None:
-                    raise ModelError("outside the domain")
-                T[i, j] = _sse_from_cut(p, base, g.effect, cuts)
+                T[i, j] = _sse_from_cut(p, plans[j], steps[j], g.effect, cuts, sigs)
             except ModelError:
                 T[i, j] = math.inf
     return T
 
 
-def _sse_from_cut(p: Prep, base: tuple, eff: E.Effect, cuts: dict) -> float:
-    effs = base + (eff,)
-    plan = E.Plan.of(effs)
+def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict, sigs: dict) -> float:
     total = 0.0
     for k, kn in p.knobs.items():
-        sig = p.signals(k)
+        sig = sigs[k]
         if eff.spec_form.stage == "condition":
             knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
-            c = E.run_signals(plan, knc, sig, p.q[k])
+            c = E.run_signals(plan, knc, sig, p.q[k], steps=steps)
         else:
             key = (eff.form, k)
             if key not in cuts:
                 j = E.step_index(plan, eff)
                 if type(eff.type).at_rest is not EffectType.at_rest:
                     # its static map sets the hysteresis' start: reuse only what comes before it
-                    j = min(j, [s for s, _ in plan.signal_steps()].index("hyst"))
+                    j = min(j, [s for s, _ in steps].index("hyst"))
                 knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
-                cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j))
+                cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j, steps=steps))
             j, knc, carry = cuts[key]
-            c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry)
+            c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry, steps=steps)
         total += kernels.sse_kernel(p.y[k], c["z"])
     return total
 

@@ -177,15 +177,17 @@ def _rest(plan: Plan, y0: float, sig: Signals) -> float:
 
 
 def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: ChainState | None = None,
-                start: int = 0, carry: dict | None = None, stop: int | None = None) -> dict:
+                start: int = 0, carry: dict | None = None, stop: int | None = None,
+                steps: list | None = None) -> dict:
     """Run the signal steps of ``plan`` (:meth:`Plan.signal_steps`) from step ``start`` (with the
     ``carry`` an earlier call stopped with) up to ``stop``; returns the carry: ``z`` (the signal),
     ``x``, ``yh``, ``free``, ``tip`` and the edge moves ``dp``, ``dn``.
 
     Stopping before a step and starting there again is how the diagnosis reuses everything a
-    candidate effect cannot change.
+    candidate effect cannot change; ``steps`` is ``plan.signal_steps()`` when the caller has it.
     """
-    steps = plan.signal_steps()
+    if steps is None:
+        steps = plan.signal_steps()
     c = {"z": x, "x": x, "dp": None, "dn": None, "yh": None, "free": None, "tip": None} if carry is None else dict(carry)
     n = len(steps) if stop is None else stop
     for i in range(start, n):
