@@ -141,7 +141,8 @@ def _knob_list(run: Run, knobs, use_tip: bool = False) -> list[int]:
 
 def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None = None,
              use_tip: bool = True, bootstrap: int = 0, seed: int = 0,
-             filter_hz: float | None = 20.0, max_misfit: float | None = None) -> Identification:
+             filter_hz: float | None = 20.0, max_misfit: float | None = None,
+             refuse_unfixed: bool = True) -> Identification:
     """Identify the straight-shaft hysteresis model of each knob from a sweep.
 
     Tip (``y<k>`` present and ``use_tip``): output-error fit of :math:`D_{pos}, D_{neg},
@@ -187,6 +188,10 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
         Largest systematic departure of the tip from the fitted loop (deg RMS over quarter
         seconds) accepted (default :data:`MAX_MISFIT`); ``math.inf`` keeps the fit whatever the
         departure, with a warning: the model to ``hyst diagnose`` the departure with.
+    refuse_unfixed : bool
+        Refuse a record that cannot fix a parameter (default). False keeps the fit's value with a
+        warning and without an uncertainty: enough to predict the tip (a study of prediction),
+        not for Algorithm 1, which reads the edges.
 
     Returns
     -------
@@ -207,7 +212,7 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
     fits: dict[int, KnobFit] = {}
     for k in ks:
         fits[k] = _identify_knob(run, k, omega, use_tip, int(bootstrap), int(seed), filter_hz, where,
-                                 MAX_MISFIT if max_misfit is None else float(max_misfit))
+                                 MAX_MISFIT if max_misfit is None else float(max_misfit), refuse_unfixed)
     methods = sorted({f.method for f in fits.values()})
     meta = {"method": methods[0] if len(methods) == 1 else
             ",".join(f"{k}:{f.method}" for k, f in fits.items())}
@@ -217,7 +222,8 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
 
 
 def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstrap: int, seed: int,
-                   filter_hz: float | None, where: str, max_misfit: float = MAX_MISFIT) -> KnobFit:
+                   filter_hz: float | None, where: str, max_misfit: float = MAX_MISFIT,
+                   refuse_unfixed: bool = True) -> KnobFit:
     yname, cname = f"y{k}", f"c{k}"
     tip = use_tip and yname in run
     chk = check_sweep(run, k, need_current=not tip)
@@ -234,11 +240,15 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         y = np.asarray(run[yname], float)
         starts = ()
         fit = fit_tip(q, y, starts, keep=chk.reversals)
-        if fit.unidentified:
+        if fit.unidentified and not refuse_unfixed:
+            for name, why in fit.unidentified.items():
+                warnings.append(f"{where_k}: the record cannot fix {name} ({why}): kept as fitted, "
+                                "without an uncertainty")
+        elif fit.unidentified:
             raise IdentificationError(
                 f"{where_k}: the record cannot fix " + "; ".join(
                     f"{name} ({why})" for name, why in fit.unidentified.items()))
-        model, stderr = fit.model, dict(fit.stderr)
+        model, stderr = fit.model, {n: v for n, v in fit.stderr.items() if n not in fit.unidentified}
         misfit = systematic_misfit(fit.model.forward(q, float(y[0])) - y, run.sample_rate if "t" in run else 1.0)
         if misfit > max_misfit:
             raise IdentificationError(
@@ -259,7 +269,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                 stderr.pop(name_tied, None)
         if bootstrap > 0:
             sd = bootstrap_tip(fit, q, y, chk, bootstrap, np.random.default_rng(seed))
-            stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS}
+            stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS if n in stderr}
         rmse = fit.rmse
         method = "tip"
         if reading is not None:
