@@ -114,3 +114,18 @@ def test_api_diagnose_and_predict_are_the_command_lines_bytes(zoo_files, tmp_pat
     assert both.meta["motion"] == "nonperiodic" and np.ptp(both["q1"]) > 0 and np.ptp(both["q2"]) > 0
     before, after = model.predict(both), diag.model.predict(both)
     assert any(not np.allclose(before[c], after[c]) for c in ("y1", "y2"))
+
+
+def test_identify_allow_misfit_keeps_a_sweep_that_carries_a_lag(tmp_path):
+    # a lag in the sweep makes the tip depart from the loop: identify refuses and says how to go on;
+    # --allow-misfit keeps the fit with a warning (the model to diagnose the lag with)
+    seed = 59
+    assert [e[0] for e in SPECS[seed]] == ["lag"]
+    (tmp_path / "sweep.csv").write_text(C.make_case(seed, SPECS[seed]).sweep)
+    args = ["identify", str(tmp_path / "sweep.csv"), "-o", str(tmp_path / "m.json")]
+    res = CliRunner().invoke(app, args)
+    assert res.exit_code == 1 and "--allow-misfit" in res.output and not (tmp_path / "m.json").exists()
+    res = CliRunner().invoke(app, args + ["--allow-misfit"])
+    assert res.exit_code == 0, res.output
+    assert "departs from the loop" in res.output and "kept as asked" in res.output
+    assert hystcli.load_model(tmp_path / "m.json").knob(1).b_pos > 0
