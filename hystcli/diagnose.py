@@ -42,7 +42,7 @@ WHICH, fitted
 
 HOW FAR
     Per fold, the chosen effects are refitted jointly on the training runs (bounded Gauss-Newton
-    from the fold's own picks and from the all-run fit, the better training fit kept) and predict
+    from the better, on the training runs, of the fold's own picks and the all-run fit) and predict
     the held-out runs at full rate: held-out RMSE (pooled over samples) and PTPE (mean over run
     and knob) before and after, shrink in %.
 
