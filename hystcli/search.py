@@ -46,6 +46,8 @@ class Prep:
     offsets: Mapping[int, float]
     shape: Shape
     condition: float | None
+    shape_stated: bool = False
+    """The run states its shape: effects of the shape read its curvature beside a stated condition."""
 
     @property
     def n(self) -> int:
@@ -60,11 +62,13 @@ class Prep:
                        self.name)
 
     def acts(self, etype: EffectType, form: Form) -> bool:
-        return etype.acts_on(form, self.shape.total_curvature, self.condition, self.two_knobs)
+        cond = None if (self.shape_stated and etype.driver == "shape") else self.condition
+        return etype.acts_on(form, self.shape.total_curvature, cond, self.two_knobs)
 
     def trace(self, effects: Sequence[E.Effect], k: int) -> E.KnobTrace:
         return E.tip_chain(self.knobs[k], k, self.q, self.t, effects, self.shape, float(self.y[k][0]),
-                           condition=self.condition, other_offset=self.offsets.get(3 - k, 0.0), source=self.name)
+                           condition=self.condition, other_offset=self.offsets.get(3 - k, 0.0), source=self.name,
+                           shape_stated=self.shape_stated)
 
     def predict(self, effects: Sequence[E.Effect]) -> dict[int, np.ndarray]:
         out = {}
@@ -102,7 +106,7 @@ def prepare(model: Model, run: Run, name: str, decimate: bool) -> Prep:
     return Prep(name, run.meta, np.ascontiguousarray(t[sl]), q,
                 {k: np.ascontiguousarray(run[f"y{k}"][sl], dtype=np.float64) for k in knobs},
                 {k: model.knob(k).with_offset(offsets[k]) for k in knobs}, dict(offsets),
-                Shape.parse(run.meta.get("shape")), E.run_condition(run.meta, name))
+                Shape.parse(run.meta.get("shape")), E.run_condition(run.meta, name), "shape" in run.meta)
 
 
 def wsse(preps: Sequence[Prep], w: np.ndarray, effs: Sequence[E.Effect]) -> float:
@@ -166,42 +170,47 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
     """
     T = np.empty((len(preps), len(grid)))
     base = tuple(base)
+    # per grid point once, not per run: whether it is off, its chain plan and that plan's steps
+    # (thousands of points times tens of runs: the bookkeeping cost more than the kernels)
+    null = [_is_null(etype, g) for g in grid]
+    plans = [None if o or g.effect is None else E.Plan.of(base + (g.effect,)) for o, g in zip(null, grid)]
+    steps = [None if pl is None else pl.signal_steps() for pl in plans]
+    acts = acting(preps, etype, grid)
     for i, p in enumerate(preps):
         cuts: dict[str, tuple] = {}
+        sigs = {k: p.signals(k) for k in p.knobs}
         for j, g in enumerate(grid):
-            form = etype.get_form(g.form)
-            if _is_null(etype, g) or not p.acts(etype, form):
+            if null[j] or not acts[i, j]:
                 T[i, j] = base_sse[i]
                 continue
+            if g.effect is None:
+                T[i, j] = math.inf  # outside the domain
+                continue
             try:
-                if g.effect is None:
-                    raise ModelError("outside the domain")
-                T[i, j] = _sse_from_cut(p, base, g.effect, cuts)
+                T[i, j] = _sse_from_cut(p, plans[j], steps[j], g.effect, cuts, sigs)
             except ModelError:
                 T[i, j] = math.inf
     return T
 
 
-def _sse_from_cut(p: Prep, base: tuple, eff: E.Effect, cuts: dict) -> float:
-    effs = base + (eff,)
-    plan = E.Plan.of(effs)
+def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict, sigs: dict) -> float:
     total = 0.0
     for k, kn in p.knobs.items():
-        sig = p.signals(k)
+        sig = sigs[k]
         if eff.spec_form.stage == "condition":
-            knc = E.condition_knob(kn, plan, p.shape, p.condition)
-            c = E.run_signals(plan, knc, sig, p.q[k])
+            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
+            c = E.run_signals(plan, knc, sig, p.q[k], steps=steps)
         else:
             key = (eff.form, k)
             if key not in cuts:
                 j = E.step_index(plan, eff)
                 if type(eff.type).at_rest is not EffectType.at_rest:
                     # its static map sets the hysteresis' start: reuse only what comes before it
-                    j = min(j, [s for s, _ in plan.signal_steps()].index("hyst"))
-                knc = E.condition_knob(kn, plan, p.shape, p.condition)
-                cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j))
+                    j = min(j, [s for s, _ in steps].index("hyst"))
+                knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
+                cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j, steps=steps))
             j, knc, carry = cuts[key]
-            c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry)
+            c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry, steps=steps)
         total += kernels.sse_kernel(p.y[k], c["z"])
     return total
 

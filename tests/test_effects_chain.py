@@ -219,3 +219,28 @@ def test_knob_model_is_the_no_effect_case():
     ref = Run({"t": T, "r1": Q[1]}, {"offset1": "4.0"})
     assert np.array_equal(m.compensate(ref).run["q1"], m.knob(1).with_offset(4.0).inverse(Q[1]))
     assert math.isfinite(float(m.compensate(ref).run.meta["offset1"]))
+
+
+def test_shape_effects_read_the_curvature_beside_a_stated_load():
+    # friction grows along the bent sheath, not with a tip load: with the shape stated, the run's
+    # condition (a load) does not drive it; without one (a tool whose runs state only the load) it does
+    m = _model(E.make_effect("friction", mu=0.4), E.make_effect("stretch", compliance=3.0, reference=0.0))
+    straight = Run({"t": T, "q1": Q[1]}, {"shape": "straight", "condition": "40"})
+    bent = Run({"t": T, "q1": Q[1]}, {"shape": "alpha=90,theta=0", "condition": "40"})
+    unstated = Run({"t": T, "q1": Q[1]}, {"condition": "40"})
+    only_stretch = _model(E.make_effect("stretch", compliance=3.0, reference=0.0))
+    # straight shaft, load 40: the stretch acts, the friction does not
+    assert np.array_equal(m.predict(straight)["y1"], only_stretch.predict(straight)["y1"])
+    # bent: the friction acts on top
+    assert not np.allclose(m.predict(bent)["y1"], only_stretch.predict(bent)["y1"])
+    # no shape stated: the load drives both, as before
+    assert not np.allclose(m.predict(unstated)["y1"], only_stretch.predict(unstated)["y1"])
+
+
+def test_stretch_slack_widens_the_dead_zone_with_the_load():
+    kn = CAT.knobs[1]
+    e = E.make_effect("stretch", "slack", compliance=4.0, reference=20.0)
+    at = E.condition_knob(kn, [e], Shape(), condition=20.0 + math.degrees(1.0))   # 1 rad above the reference
+    assert at.d_pos == pytest.approx(kn.d_pos + 2.0) and at.d_neg == pytest.approx(kn.d_neg - 2.0)
+    assert (at.h_pos, at.h_neg, at.b_pos, at.b_neg) == (kn.h_pos, kn.h_neg, kn.b_pos, kn.b_neg)
+    assert E.condition_knob(kn, [e], Shape(), condition=20.0) is kn   # at the reference: the base model

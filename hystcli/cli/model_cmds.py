@@ -25,6 +25,9 @@ def identify_cmd(
         "--current-only", help="Ignore a measured tip angle: edges and backlash from the current alone.")] = False,
     bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over cycles for uncertainties "
                                            "(0: from the fit's covariance).")] = 0,
+    allow_misfit: Annotated[bool, typer.Option(
+        "--allow-misfit", help="Keep the tip fit even when the tip departs from the loop (something the "
+        "model lacks: lag, creep, a wall), with a warning, to diagnose the departure.")] = False,
     beta_catheter_mm: Annotated[Optional[float], typer.Option(
         help="Tendon offset from the backbone (mm), stored as the model's geometry.")] = None,
     beta_knob_mm: Annotated[Optional[float], typer.Option(help="Knob pulley radius (mm).")] = None,
@@ -57,7 +60,8 @@ def identify_cmd(
     io.check_not_input(output, [sweep])
     with about(sweep):
         run = io.read_run(sweep, require=("t",))
-        result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed)
+        result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed,
+                          max_misfit=float("inf") if allow_misfit else None)
     for fit in result.fits.values():
         for w in fit.warnings:
             warn(w)

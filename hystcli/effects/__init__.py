@@ -10,7 +10,7 @@ name        physics                                                 forms (first
 ==========  =====================================================  ===============================
 friction    capstan friction grows with the total curvature         capstan, backlash, slope
 deadzone    the shape changes the dead zone                          width, centre
-stretch     a stated load stretches the cable: the output moves     linear, stiffening
+stretch     a stated load stretches the cable: the output moves     linear, stiffening, slack
 coupling    the other knob moves this knob's loop                    input, output, deadzone
                                                                      (each also -magnitude)
 rate        viscous lag of the tip behind the knob                   input, input2, output, output2

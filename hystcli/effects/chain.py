@@ -115,31 +115,47 @@ class KnobTrace:
     yh: np.ndarray | None = None
 
 
+def driver_value(e: Effect, shape: Shape, condition: float | None, shape_stated: bool = False) -> float:
+    """What drives a condition-stage effect on a run (deg): the stated ``condition``, or the
+    shape's total curvature.
+
+    An effect of the shape (``driver == "shape"``: friction along the bent sheath, a dead zone the
+    bend changes) reads the curvature whenever the run states its shape, even beside a stated load:
+    a load does not bend the sheath. Without a stated shape (cable-driven tools whose runs state a
+    resistive load instead) it reads the condition, as every other effect does when one is stated.
+    """
+    if condition is None or (shape_stated and e.type.driver == "shape"):
+        return shape.total_curvature
+    return condition
+
+
 def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
-                   condition: float | None = None) -> KnobModel:
+                   condition: float | None = None, shape_stated: bool = False) -> KnobModel:
     """The knob's parameters under the run's condition (stage ``condition``).
 
     The driver is the shape's total curvature (deg), or ``condition`` (deg) when the run states
     one: other cable-driven data state their own condition (a resistive load) in the run's
-    ``condition`` metadata, scaled to degrees of curvature-equivalent. Returns ``knob`` itself (the
-    same object) when no effect changes anything.
+    ``condition`` metadata, scaled to degrees of curvature-equivalent (:func:`driver_value`: an
+    effect of the shape reads the curvature when the run states its shape). Returns ``knob``
+    itself (the same object) when no effect changes anything.
 
     Raises
     ------
     ModelError
         When the changed parameters are no longer a valid model (names the effects).
     """
-    conds = Plan.of(effects).condition if not isinstance(effects, Plan) else effects.condition
+    plan = effects if isinstance(effects, Plan) else Plan.of(effects)
+    conds = plan.condition
     if not conds:
         return knob
-    kdeg = shape.total_curvature if condition is None else condition
     p = knob.params()
-    changed = [e.name for e in conds if e.type.condition(e, p, kdeg)]
+    changed = [e.name for e in conds if e.type.condition(e, p, driver_value(e, shape, condition, shape_stated))]
     if not changed:
         return knob
     try:
         return KnobModel(**p)
     except ModelError as exc:
+        kdeg = shape.total_curvature if condition is None else condition
         raise ModelError(f"effect {'+'.join(changed)} at total curvature {kdeg:g} deg: {exc}") from None
 
 
@@ -161,15 +177,17 @@ def _rest(plan: Plan, y0: float, sig: Signals) -> float:
 
 
 def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: ChainState | None = None,
-                start: int = 0, carry: dict | None = None, stop: int | None = None) -> dict:
+                start: int = 0, carry: dict | None = None, stop: int | None = None,
+                steps: list | None = None) -> dict:
     """Run the signal steps of ``plan`` (:meth:`Plan.signal_steps`) from step ``start`` (with the
     ``carry`` an earlier call stopped with) up to ``stop``; returns the carry: ``z`` (the signal),
     ``x``, ``yh``, ``free``, ``tip`` and the edge moves ``dp``, ``dn``.
 
     Stopping before a step and starting there again is how the diagnosis reuses everything a
-    candidate effect cannot change.
+    candidate effect cannot change; ``steps`` is ``plan.signal_steps()`` when the caller has it.
     """
-    steps = plan.signal_steps()
+    if steps is None:
+        steps = plan.signal_steps()
     c = {"z": x, "x": x, "dp": None, "dn": None, "yh": None, "free": None, "tip": None} if carry is None else dict(carry)
     n = len(steps) if stop is None else stop
     for i in range(start, n):
@@ -210,7 +228,7 @@ def step_index(plan: Plan, eff: Effect) -> int:
 def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarray | None,
               effects: Sequence[Effect] = (), shape: Shape = Shape(), y0: float = 0.0,
               state: ChainState | None = None, condition: float | None = None,
-              other_offset: float = 0.0, source: str = "run") -> KnobTrace:
+              other_offset: float = 0.0, source: str = "run", shape_stated: bool = False) -> KnobTrace:
     """Run knob ``k`` through every stage: the tip angle the effects make of the commands.
 
     Parameters
@@ -235,6 +253,8 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         Driver of the condition stage in place of the shape's total curvature (deg).
     other_offset : float
         The other knob's offset (deg): the zero of a coupling driven by its bend's size.
+    shape_stated : bool
+        The run states its shape (effects of the shape then read it beside a stated condition).
 
     Returns
     -------
@@ -242,7 +262,7 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         With no effect switched on, ``trace.y`` is exactly ``knob.forward(q[k], y0)``.
     """
     plan = Plan.of(effects)
-    kn = condition_knob(knob, plan, shape, condition)
+    kn = condition_knob(knob, plan, shape, condition, shape_stated)
     sig = Signals(k, t, q.get(3 - k), float(other_offset), float(y0), source)
     c = run_signals(plan, kn, sig, q[k], state)
     return KnobTrace(kn, c["x"], c["free"], c["tip"], c["z"], c["yh"])
@@ -326,7 +346,8 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
             out[k] = knob.forward(q[k], y0)
         else:
             out[k] = tip_chain(knob, k, q, t, effs, shape, y0, condition=cond,
-                               other_offset=offsets.get(3 - k, 0.0), source=run.source or "run").y
+                               other_offset=offsets.get(3 - k, 0.0), source=run.source or "run",
+                               shape_stated="shape" in run.meta).y
     return out
 
 
@@ -419,7 +440,8 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
     steps = _reverse_steps(plan)
     two = len(use) == 2
     cut = next((i for i, (kind, e) in enumerate(steps) if two and _needs_other(kind, e, plan)), len(steps))
-    kns = {k: condition_knob(model.knob(k).with_offset(offs[k]), plan, shape, cond) for k in use}
+    kns = {k: condition_knob(model.knob(k).with_offset(offs[k]), plan, shape, cond, "shape" in run.meta)
+           for k in use}
 
     def sig_of(k: int, other: np.ndarray | None) -> Signals:
         return Signals(k, t, other, float(offs.get(3 - k, 0.0)), 0.0, src)

@@ -13,6 +13,9 @@ form        move of both heights h_pos, h_neg
 linear      compliance * (c - reference)                                    (default)
 stiffening  compliance * (g(c) - g(reference)), g(c) = sign(c) ln(1 + s|c|)/s: a cable
             whose stiffness grows with the load (s = stiffening, 1/rad; s -> 0 is linear)
+slack       no height moves: the dead zone widens by compliance * (c - reference), split
+            evenly between its edges: each tendon, stretched by the load it carries,
+            must be wound that much further before it pulls (the slack the knob takes up)
 ==========  ===========================================================================
 """
 from __future__ import annotations
@@ -51,9 +54,21 @@ class Stretch(EffectType):
              {"compliance": np.linspace(-30.0, 30.0, 21), "reference": np.linspace(-90.0, 180.0, 10),
               "stiffening": np.geomspace(0.5, 5.0, 3)},
              "the output moves less per unit of load as the load grows (a stiffening cable)"),
+        Form("slack", "condition", 0, ("compliance", "reference"), ("deg/rad", "deg"), "compliance", 0.0,
+             {"compliance": 3.0, "reference": 0.0}, {"compliance": (-20.0, 20.0), "reference": (-90.0, 180.0)},
+             {"compliance": (-_INF, _INF), "reference": (-_INF, _INF)},
+             {"compliance": np.linspace(-20.0, 20.0, 41), "reference": np.linspace(-90.0, 180.0, 19)},
+             "the dead zone widens by compliance per rad of condition above the reference (stretched tendons)"),
     )
 
     def condition(self, eff, p, cond_deg):
+        if eff.form == "slack":
+            half = 0.5 * eff["compliance"] * math.radians(cond_deg - eff["reference"])
+            if half == 0.0:
+                return False
+            p["d_pos"] += half
+            p["d_neg"] -= half
+            return True
         if eff.form == "stiffening":
             s = eff["stiffening"]
             lift = eff["compliance"] * (_soft(math.radians(cond_deg), s) - _soft(math.radians(eff["reference"]), s))

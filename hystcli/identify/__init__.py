@@ -141,7 +141,8 @@ def _knob_list(run: Run, knobs, use_tip: bool = False) -> list[int]:
 
 def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None = None,
              use_tip: bool = True, bootstrap: int = 0, seed: int = 0,
-             filter_hz: float | None = 20.0) -> Identification:
+             filter_hz: float | None = 20.0, max_misfit: float | None = None,
+             refuse_unfixed: bool = True) -> Identification:
     """Identify the straight-shaft hysteresis model of each knob from a sweep.
 
     Tip (``y<k>`` present and ``use_tip``): output-error fit of :math:`D_{pos}, D_{neg},
@@ -183,6 +184,14 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
         Seed of the bootstrap.
     filter_hz : float or None
         Cut-off of the current's low-pass (None: use the current as recorded).
+    max_misfit : float or None
+        Largest systematic departure of the tip from the fitted loop (deg RMS over quarter
+        seconds) accepted (default :data:`MAX_MISFIT`); ``math.inf`` keeps the fit whatever the
+        departure, with a warning: the model to ``hyst diagnose`` the departure with.
+    refuse_unfixed : bool
+        Refuse a record that cannot fix a parameter (default). False keeps the fit's value with a
+        warning and without an uncertainty: enough to predict the tip (a study of prediction),
+        not for Algorithm 1, which reads the edges.
 
     Returns
     -------
@@ -202,7 +211,8 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
     ks = _knob_list(run, knobs, use_tip)
     fits: dict[int, KnobFit] = {}
     for k in ks:
-        fits[k] = _identify_knob(run, k, omega, use_tip, int(bootstrap), int(seed), filter_hz, where)
+        fits[k] = _identify_knob(run, k, omega, use_tip, int(bootstrap), int(seed), filter_hz, where,
+                                 MAX_MISFIT if max_misfit is None else float(max_misfit), refuse_unfixed)
     methods = sorted({f.method for f in fits.values()})
     meta = {"method": methods[0] if len(methods) == 1 else
             ",".join(f"{k}:{f.method}" for k, f in fits.items())}
@@ -212,7 +222,8 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
 
 
 def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstrap: int, seed: int,
-                   filter_hz: float | None, where: str) -> KnobFit:
+                   filter_hz: float | None, where: str, max_misfit: float = MAX_MISFIT,
+                   refuse_unfixed: bool = True) -> KnobFit:
     yname, cname = f"y{k}", f"c{k}"
     tip = use_tip and yname in run
     chk = check_sweep(run, k, need_current=not tip)
@@ -229,17 +240,26 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         y = np.asarray(run[yname], float)
         starts = ()
         fit = fit_tip(q, y, starts, keep=chk.reversals)
-        if fit.unidentified:
+        if fit.unidentified and not refuse_unfixed:
+            for name, why in fit.unidentified.items():
+                warnings.append(f"{where_k}: the record cannot fix {name} ({why}): kept as fitted, "
+                                "without an uncertainty")
+        elif fit.unidentified:
             raise IdentificationError(
                 f"{where_k}: the record cannot fix " + "; ".join(
                     f"{name} ({why})" for name, why in fit.unidentified.items()))
-        model, stderr = fit.model, dict(fit.stderr)
+        model, stderr = fit.model, {n: v for n, v in fit.stderr.items() if n not in fit.unidentified}
         misfit = systematic_misfit(fit.model.forward(q, float(y[0])) - y, run.sample_rate if "t" in run else 1.0)
-        if misfit > MAX_MISFIT:
+        if misfit > max_misfit:
             raise IdentificationError(
                 f"{where_k}: the tip departs from the dead-zone + backlash loop by {misfit:.2f} deg RMS over "
                 f"whole stretches (the tracker's noise is {fit.noise:.2f} deg): something the model lacks "
-                "stops or bends the tip (a wall, a saturating bend); identify on a sweep clear of it")
+                "stops or bends the tip (a wall, a saturating bend); identify on a sweep clear of it, or keep "
+                "the fit with --allow-misfit and hyst diagnose the departure")
+        if misfit > MAX_MISFIT:
+            # kept on request (max_misfit): the model is the loop's best fit, not the whole tip
+            warnings.append(f"{where_k}: the tip departs from the loop by {misfit:.2f} deg RMS over whole "
+                            "stretches: kept as asked; hyst diagnose what the loop leaves out")
         for name, why in fit.sliding.items():
             tied = SLIDES_WITH[name]
             warnings.append(f"{where_k}: {name} is not fixed by this record ({why}); the model predicts the "
@@ -249,7 +269,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                 stderr.pop(name_tied, None)
         if bootstrap > 0:
             sd = bootstrap_tip(fit, q, y, chk, bootstrap, np.random.default_rng(seed))
-            stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS}
+            stderr = {n: max(stderr[n], sd[n]) for n in TIP_PARAMS if n in stderr}
         rmse = fit.rmse
         method = "tip"
         if reading is not None:
