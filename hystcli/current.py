@@ -333,10 +333,10 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
                 x[pcs[jj][1] - 1] - x[pcs[jj][0]]) > 6 * sig:
             stop = pcs[jj][0]
             break
-    # the kink is searched near the segmentation's break (two points either side): the
-    # segmentation places it to a point, the fit to a fraction of one
-    brk = pcs[j + 1][0]
-    lo_b, hi_b = max(brk - 2 - minlen // 2, pcs[j][0]), min(brk + 2 + minlen // 2, pcs[j + 1][1] - 1)
+    # the kink is searched over the whole flat stretch and the loaded piece: noise can split off
+    # a short flat piece just past the true edge (a one-step drop, then a level pair of
+    # readings), and a search near the segmentation's break would then sit degrees late
+    lo_b, hi_b = a0, pcs[j + 1][1] - 1
     # a stiffening loaded side needs its quadratic term, and enough points to carry it
     curved = stop - pcs[j + 1][0] >= 10
     kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
