@@ -66,3 +66,30 @@ def sim_robot(*args: str) -> Iterator[str]:
         yield path
     finally:
         stop(proc)
+
+
+def interrupt_after(argv: list[str], ready: str, timeout: float = 120.0) -> tuple[int, str]:
+    """Run ``python -m hystcli *argv``, and a second after it prints a stderr line starting with
+    ``ready`` send it SIGINT, as a user's Ctrl-C: (exit code, stderr).
+
+    SIGINT gets its default action in the child, as a terminal gives it: a test run started in the
+    background of a non-interactive shell ignores SIGINT, and a child would inherit that.
+    """
+    import time
+
+    proc = subprocess.Popen([sys.executable, "-m", "hystcli", *argv], stderr=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        line = proc.stderr.readline()
+        while line and not line.startswith(ready):
+            line = proc.stderr.readline()
+        assert line.startswith(ready), proc.stderr.read()
+        time.sleep(1.0)  # a second into the motion: the knob is away from where it began
+        proc.send_signal(signal.SIGINT)
+        _, err = proc.communicate(timeout=timeout)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    return proc.returncode, err

@@ -11,9 +11,6 @@ from __future__ import annotations
 
 import json
 import math
-import signal
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -31,7 +28,7 @@ from hystcli.model import Shape
 from hystcli.robot import Interrupted, play_trajectory
 from hystcli.safety import LimitExceeded, Limits
 from hystcli.twin import LiveTwin, periodic, simulate
-from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop
+from simrobot import TIMEOUT, interrupt_after, sim_robot, start_sim_robot, stop
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot` and `hyst simulate` serve as ice-a
 SHAPE = "alpha=45,theta=0"
@@ -234,26 +231,9 @@ def test_ctrl_c_on_hyst_play_returns_the_knob(tmp_path):
     assert runner.invoke(app, ["sweep", "-o", str(sweep), "--quiet"]).exit_code == 0
     out = tmp_path / "run.csv"
     with sim_robot() as path:
-        # SIGINT's default action, as a terminal gives it: a test run started in the background
-        # of a non-interactive shell ignores SIGINT, and a child would inherit that
-        proc = subprocess.Popen([sys.executable, "-m", "hystcli", "play", str(sweep), "--port", path,
-                                 "-o", str(out), "--timeout", TIMEOUT],
-                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-        try:
-            # readiness: the line it prints after checking the whole file, before the first MOVE
-            line = proc.stderr.readline()
-            while line and not line.startswith("checked:"):
-                line = proc.stderr.readline()
-            assert line.startswith("checked:"), proc.stderr.read()
-            time.sleep(1.0)  # a second into the sweep: the knob is well away from 0
-            proc.send_signal(signal.SIGINT)
-            _, err = proc.communicate(timeout=60)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-        assert proc.returncode == 130, err
+        code, err = interrupt_after(["play", str(sweep), "--port", path, "-o", str(out), "--timeout", TIMEOUT],
+                                    "checked:", timeout=60)
+        assert code == 130, err
         errors = [ln for ln in err.splitlines() if ln.startswith("Error:")]
         assert len(errors) == 1 and "Traceback" not in err, err
         assert errors[0].startswith("Error: interrupted; motors stopped, knob 1 returned to +0.00 deg")

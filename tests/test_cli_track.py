@@ -19,7 +19,7 @@ from hystcli.emulator import Fault, serve
 from hystcli.io import Run, read_run, save_model, write_run
 from hystcli.model import KnobIdentification, Model, Shape
 from hystcli.twin import LiveTwin, periodic, simulate
-from simrobot import TIMEOUT, start_sim_robot, stop
+from simrobot import TIMEOUT, interrupt_after, start_sim_robot, stop
 
 CAT = calibrated_catheter("ice-a")   # what `hyst sim-robot --catheter ice-a` serves
 SHAPE = "alpha=45,theta=0"
@@ -227,8 +227,6 @@ def test_ctrl_c_on_hyst_track_returns_the_knob(files, tmp_path):
     """The user's Ctrl-C: `hyst track` in a subprocess, paced through a 10 s reference on `hyst
     sim-robot`, gets SIGINT a second after it started: exit 130 (as `hyst play`), one line that
     says the knob went back, no log, and the robot reads the knob at 0 deg."""
-    import signal
-    import time
 
     t, r = periodic(amplitude=30.0, freq=0.1, cycles=1.0, fs=50.0)
     ref = tmp_path / "slow.csv"
@@ -236,25 +234,9 @@ def test_ctrl_c_on_hyst_track_returns_the_knob(files, tmp_path):
     out = tmp_path / "run.csv"
     proc_robot, path = start_sim_robot("--shape", SHAPE, "--effect", "none")
     try:
-        # SIGINT's default action, as a terminal gives it (a background shell may ignore it)
-        proc = subprocess.Popen([sys.executable, "-m", "hystcli", "track", str(ref), "--port", path, "--model",
-                                 str(files / "model.json"), "-o", str(out), "--timeout", TIMEOUT, "--allow-fast"],
-                                stderr=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
-                                preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
-        try:
-            # readiness: the line it prints once the first command is reached and the run under way
-            line = proc.stderr.readline()
-            while line and not line.startswith("tracking "):
-                line = proc.stderr.readline()
-            assert line.startswith("tracking "), proc.stderr.read()
-            time.sleep(1.0)  # a second into the run: the knob is away from 0
-            proc.send_signal(signal.SIGINT)
-            _, err = proc.communicate(timeout=120)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
-        assert proc.returncode == 130, err
+        code, err = interrupt_after(["track", str(ref), "--port", path, "--model", str(files / "model.json"),
+                                     "-o", str(out), "--timeout", TIMEOUT, "--allow-fast"], "tracking ")
+        assert code == 130, err
         errors = [ln for ln in err.splitlines() if ln.startswith("Error:")]
         assert len(errors) == 1 and "Traceback" not in err, err
         assert errors[0].startswith("Error: interrupted; motors stopped, knob 1 returned to +0.00 deg"), errors

@@ -22,7 +22,7 @@ from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
 from .app import (BaudOpt, EffectOpt, OutOpt, QuietOpt, command, echo_json, effects_option,
                   fail, info, stderr_is_tty)
-from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxSpeedOpt, MoveSpeedOpt, TableOrJson,
+from .robot_opts import (AllowFastOpt, NoReturnOpt, FormatTJOpt, MaxSpeedOpt, MoveSpeedOpt, TableOrJson,
                          TimeoutOpt, TravelLimitOpt, finite, limit_hint, limits, positive)
 
 PortArg = Annotated[str, typer.Option("--port", help="Serial port of the robot (name or pyserial URL).",
@@ -200,9 +200,7 @@ def play_cmd(
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
-    no_return: Annotated[bool, typer.Option(
-        "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
-                            "returning them to where the play began.")] = False,
+    no_return: NoReturnOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Play the knob commands of TRAJECTORY on the robot and record t, q, c (and y) to a run CSV.

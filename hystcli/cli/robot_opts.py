@@ -61,6 +61,9 @@ AllowFastOpt = Annotated[bool, typer.Option(
     "--allow-fast",
     help="Accept steps beyond --max-speed (and --max-accel): `play` sends them at the speed "
          "limit (the knob arrives late), `compensate` writes them. Travel is never waived.")]
+NoReturnOpt = Annotated[bool, typer.Option(
+    "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
+                        "returning them to where they began.")]
 MoveSpeedOpt = Annotated[float, typer.Option(
     "--speed", callback=positive,
     help="Knob speed of the move, deg/s; the default is slow enough to watch and stop by hand.")]

@@ -17,7 +17,7 @@ import typer
 from ..errors import DataError
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .app import BaudOpt, ModelOpt, OutOpt, QuietOpt, command, fail, info, stderr_is_tty
-from .robot_opts import AllowFastOpt, TimeoutOpt, TravelLimitOpt, MaxSpeedOpt, limit_hint, limits
+from .robot_opts import AllowFastOpt, NoReturnOpt, TimeoutOpt, TravelLimitOpt, MaxSpeedOpt, limit_hint, limits
 
 
 class LatencyMode(str, Enum):
@@ -51,9 +51,7 @@ def track_cmd(
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
-    no_return: Annotated[bool, typer.Option(
-        "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
-                            "returning them to where the run began.")] = False,
+    no_return: NoReturnOpt = False,
     quiet: QuietOpt = False,
 ) -> None:
     """Compensate REFERENCE live through the model and play each command on the robot as it comes.
