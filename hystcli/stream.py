@@ -16,7 +16,8 @@ What is causal, and what is not:
   ``<= i`` only;
 * ``coupling`` reads the other knob's command of the same sample: solved per sample by the same
   fixed-point iteration the batch inverse runs over the whole run (so a two-knob step costs up to
-  ``iterations`` passes over the coupled stages);
+  ``iterations`` passes over the coupled stages: one compiled call of
+  :mod:`hystcli.stream_kernels` where every coupled stage has an op there, else Python passes);
 * ``latency`` (the tracker reports the tip ``delay`` s late) has no causal exact inverse: to make
   the *reported* tip follow ``r`` the command at ``t`` must aim at ``r(t + delay)``. The default
   (``latency="delay"``) buffers ``lookahead = ceil(delay / dt)`` samples: :meth:`Compensator.step`
@@ -32,8 +33,10 @@ Time: the time-driven stages (``rate``, ``creep``, ``latency``) need each sample
 ``i * dt``).
 
 Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation but the returned
-float or pair); :meth:`Compensator.steps` runs a knob without effects through the compiled kernel
-of :mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
+float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
+(the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
+:meth:`Compensator.steps` runs a knob without effects through the compiled kernel of
+:mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
 """
 from __future__ import annotations
 
@@ -194,9 +197,9 @@ class _CompiledCoupling:
 
     @staticmethod
     def _flatten(s: Any, table: list) -> bool:
+        from . import stream_kernels as K
         from .effects import kernels
         from .effects.coupling import _CouplingStep
-        from . import stream_kernels as K
 
         if isinstance(s, kernels.Cascade):
             return all(_CompiledCoupling._flatten(x, table) for x in s.steps)

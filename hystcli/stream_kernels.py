@@ -187,7 +187,7 @@ def coupled_step(h1, h2, t, iterations, ops, rng, par, st, work):
                   ops, par, st, work)
         d1 = abs(n1 - q1)
         d2 = abs(n2 - q2)
-        change = d2 if d2 > d1 else d1   # Python's max(d1, d2)
+        change = d2 if d2 > d1 else d1  # noqa: FURB136 (Python's max(d1, d2), NaN and all)
         q1 = n1
         q2 = n2
         if change < 1e-10:
@@ -207,4 +207,4 @@ def new_arrays(n_ops: int, n_par: int, n_st: int) -> tuple[np.ndarray, np.ndarra
             np.zeros(max(n_st, 1)))
 
 
-__all__ = ["COUPLE", "UNLAG", "HYST", "LAG", "STATE_SIZE", "coupled_step", "new_arrays"]
+__all__ = ["COUPLE", "HYST", "LAG", "STATE_SIZE", "UNLAG", "coupled_step", "new_arrays"]
