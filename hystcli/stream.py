@@ -16,7 +16,8 @@ What is causal, and what is not:
   ``<= i`` only;
 * ``coupling`` reads the other knob's command of the same sample: solved per sample by the same
   fixed-point iteration the batch inverse runs over the whole run (so a two-knob step costs up to
-  ``iterations`` passes over the coupled stages);
+  ``iterations`` passes over the coupled stages: one compiled call of
+  :mod:`hystcli.stream_kernels` where every coupled stage has an op there, else Python passes);
 * ``latency`` (the tracker reports the tip ``delay`` s late) has no causal exact inverse: to make
   the *reported* tip follow ``r`` the command at ``t`` must aim at ``r(t + delay)``. The default
   (``latency="delay"``) buffers ``lookahead = ceil(delay / dt)`` samples: :meth:`Compensator.step`
@@ -32,8 +33,10 @@ Time: the time-driven stages (``rate``, ``creep``, ``latency``) need each sample
 ``i * dt``).
 
 Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation but the returned
-float or pair); :meth:`Compensator.steps` runs a knob without effects through the compiled kernel
-of :mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
+float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
+(the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
+:meth:`Compensator.steps` runs a knob without effects through the compiled kernel of
+:mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
 """
 from __future__ import annotations
 
@@ -167,6 +170,110 @@ class _Knob:
                 s.reset()
 
 
+class _CompiledCoupling:
+    """The coupled tails of two knobs and what each knob's coupling sees of the other's command,
+    as the op table of :mod:`hystcli.stream_kernels`: the per-sample fixed point in one compiled
+    call. The table owns the state of those stages (the Python stage objects of the tails and of
+    ``seen`` then sit idle); the head stays in Python. Built only when every stage has an op."""
+
+    __slots__ = ("ops", "rng", "par", "st", "work", "kernel", "pending", "_params", "_fresh", "_hysts")
+
+    @classmethod
+    def build(cls, c1: _Knob, c2: _Knob, plan: chain.Plan) -> "_CompiledCoupling | None":
+        # a hysteresis in a tail starts behind the tip reading through the output stages: done in
+        # Python on the first sample, exact only when no output stage reads the other knob there
+        if any(e.type.cross_knob(e) for e in plan.output) and any(
+                s is c.hyst for c in (c1, c2) for s in c.tail):
+            return None
+        table: list = []
+        rng = []
+        for stages in (c1.tail, c2.tail, c1.seen, c2.seen):
+            lo = len(table)
+            for s in stages:
+                if not cls._flatten(s, table):
+                    return None
+            rng += [lo, len(table)]
+        return cls(table, rng)
+
+    @staticmethod
+    def _flatten(s: Any, table: list) -> bool:
+        from . import stream_kernels as K
+        from .effects import kernels
+        from .effects.coupling import _CouplingStep
+
+        if isinstance(s, kernels.Cascade):
+            return all(_CompiledCoupling._flatten(x, table) for x in s.steps)
+        if isinstance(s, kernels.UnlagStep):
+            table.append((K.UNLAG, s))
+        elif isinstance(s, kernels.LagStep):
+            table.append((K.LAG, s))
+        elif isinstance(s, _CouplingStep):
+            table.append((K.COUPLE, s))
+        elif isinstance(s, _Hysteresis):
+            table.append((K.HYST, s))
+        else:
+            return False
+        return True
+
+    def __init__(self, table: list, rng: list) -> None:
+        from . import stream_kernels as K
+
+        self.kernel = K.coupled_step
+        n_par = n_st = 0
+        rows = []
+        for code, s in table:
+            rows.append((code, n_par, n_st))
+            n_par += {K.COUPLE: 4, K.UNLAG: 3, K.HYST: 9 + 3 * len(getattr(s, "edges", ())), K.LAG: 1}[code]
+            n_st += K.STATE_SIZE[code]
+        self.ops, self.par, self.st, self.work = K.new_arrays(len(rows), n_par, n_st)
+        for i, row in enumerate(rows):
+            self.ops[i] = row
+        self.rng = np.asarray(rng, dtype=np.int64)
+        self._params = [(code, s, p) for (code, s), (_, p, _) in zip(table, rows)]
+        self._fresh = [(code, st) for (code, _), (_, _, st) in zip(table, rows) if code in (K.UNLAG, K.LAG)]
+        self._hysts = [(s, st) for (code, s), (_, _, st) in zip(table, rows) if code == K.HYST]
+        self.load_params()
+        self.reset()
+
+    def load_params(self) -> None:
+        """The stages' parameters now (a new offset moves the hysteresis and a coupling's zero)."""
+        from . import stream_kernels as K
+
+        par = self.par
+        for code, s, p in self._params:
+            if code == K.COUPLE:
+                par[p:p + 4] = (s.gain, s.sign, 1.0 if s.eff.form.endswith("-magnitude") else 0.0, s.other_offset)
+            elif code == K.UNLAG:
+                par[p:p + 3] = (s.fraction, s.tau, s.lead)
+            elif code == K.LAG:
+                par[p] = s.tau
+            else:
+                par[p:p + 8] = s.kn._kernel_args()
+                par[p + 8] = len(s.edges)
+                for j, e in enumerate(s.edges):
+                    q = p + 9 + 3 * j
+                    par[q:q + 3] = (float(e["gain"]), 1.0 if e.form.endswith("-magnitude") else 0.0,
+                                    s.other_offset)
+
+    def reset(self) -> None:
+        """Every stage at rest (the lags start on their first input); the hysteresis starts on
+        the first sample (:meth:`start`)."""
+        self.st[:] = 0.0
+        for code, s in self._fresh:
+            self.st[s] = 1.0          # fresh
+            self.st[s + 4] = -1.0     # no sample interval seen yet
+        self.work[:] = self.st
+        self.pending = bool(self._hysts)
+
+    def start(self) -> None:
+        """The hysteresis state behind the tip reading at rest, as ``_Hysteresis`` starts it."""
+        for h, s in self._hysts:
+            h._start(None)
+            self.st[s] = h.y
+            self.st[s + 1] = h.x
+        self.pending = False
+
+
 class Compensator:
     """Streaming compensation: one desired tip angle in, one knob command out, causal.
 
@@ -274,6 +381,10 @@ class Compensator:
                     seen.append(fs(e))
             self._chains[k] = _Knob(k, made[:cut], made[cut:], hyst, seen)
         self._coupled = two and cut < len(kept)
+        # the coupled tails' per-sample fixed point as one compiled call, where every stage has an
+        # op (hystcli/stream_kernels.py); else the Python passes of _command
+        self._fast = _CompiledCoupling.build(self._chains[self._knobs[0]], self._chains[self._knobs[1]],
+                                             self._plan) if self._coupled else None
         # the time-driven stages (lags, creep, the tracker delay) need each sample's time
         self._needs_t = any(e.type.driver in ("speed", "time") for e in self._effects if not e.is_null)
         if self.delay_s > 0.0 and latency == "delay":
@@ -338,6 +449,8 @@ class Compensator:
         self._rest_y = ys
         for i, k in enumerate(self._knobs):
             self._chains[k].reset(ys[i])
+        if self._fast is not None:
+            self._fast.reset()
         self._n = 0          # samples taken
         self._last_t = -math.inf
         self._filled = 0     # samples in the latency buffer
@@ -374,6 +487,8 @@ class Compensator:
             for s in ch.head + ch.tail:
                 if hasattr(s, "other_offset"):
                     s.other_offset = oo
+        if self._fast is not None:
+            self._fast.load_params()
 
     def _per_knob(self, value: Any, what: str, broadcast: bool = False) -> list[float]:
         n = len(self._knobs)
@@ -405,6 +520,21 @@ class Compensator:
         if not self._coupled:
             return tuple(self._chains[k].run(rs[i], t, None) for i, k in enumerate(self._knobs))
         c1, c2 = self._chains[self._knobs[0]], self._chains[self._knobs[1]]
+        fast = self._fast
+        if fast is not None:
+            h1 = rs[0]
+            for s in c1.head:
+                h1 = s.step(h1, t, None)
+            h2 = rs[1]
+            for s in c2.head:
+                h2 = s.step(h2, t, None)
+            if fast.pending:
+                fast.start()
+            q1, q2, ok = fast.kernel(h1, h2, t, self.iterations, fast.ops, fast.rng, fast.par, fast.st, fast.work)
+            if not ok:
+                self._warnings.append("the coupling's per-sample fixed point did not converge: the last "
+                                      "iterate is used")
+            return (q1, q2)
         # the head (stages that read no other knob) once; then the tail solved for both knobs by
         # the batch inverse's fixed-point iteration, restarted from this sample's state each pass
         h1 = h2 = 0.0
