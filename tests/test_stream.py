@@ -58,16 +58,17 @@ def _stream(c: hystcli.Compensator, ref: Run, knobs: list[int]) -> np.ndarray:
     return q[c.lookahead:]
 
 
-CASES = [(None, None)] + [f for f in FORMS]
+# every form on both references, but the output couplings on the two-knob one (no fixed point at
+# reversals: test_output_coupling_without_fixed_point_says_so)
+CASES = [(r, n, f) for r in REFS for n, f in [(None, None)] + FORMS
+         if not ((n, f) in NO_FIXED_POINT and len(REFS[r].knobs("r")) == 2)]
 
 
-@pytest.mark.parametrize("ref_name", list(REFS))
-@pytest.mark.parametrize("name, form", CASES, ids=["base"] + [f"{n}-{f}" for n, f in FORMS])
+@pytest.mark.parametrize("ref_name, name, form", CASES,
+                         ids=[f"{r}-{'base' if n is None else f'{n}-{f}'}" for r, n, f in CASES])
 def test_step_gives_what_compensate_writes(name, form, ref_name):
     ref = REFS[ref_name].with_meta(shape=BENT)
     knobs = ref.knobs("r")
-    if (name, form) in NO_FIXED_POINT and len(knobs) == 2:
-        pytest.skip("no fixed point at reversals: test_output_coupling_without_fixed_point_says_so")
     model = _model() if name is None else _model(_effect(name, form))
     batch = compensate(model, ref)
     c = hystcli.Compensator.for_run(model, ref.meta, knobs=knobs, dt=0.01)
@@ -236,3 +237,19 @@ def test_bad_samples_are_data_errors():
 
 def test_compensator_is_a_lazy_public_name():
     assert "Compensator" in hystcli.__all__ and "Compensator" in dir(hystcli)
+
+
+def test_coupling_with_a_second_order_input_lag_says_its_commands_may_miss():
+    """Neither inverse is exact for a coupling with a second-order input lag on two knobs (the
+    batch's iteration does not converge; measured 2-5 deg RMS misses on the model): the stream
+    must say so rather than return commands as if exact, and a first-order lag must not warn."""
+    ref = REFS["nonperiodic"].with_meta(shape=BENT)
+    knobs = ref.knobs("r")
+    model = _model(_effect("coupling", "input"), _effect("rate", "input2"))
+    batch = compensate(model, ref)
+    assert any("did not converge" in w for w in batch.warnings)
+    c = hystcli.Compensator.for_run(model, ref.meta, knobs=knobs, dt=0.01)
+    assert any("second-order input lag" in w for w in c.warnings)
+    plain = hystcli.Compensator.for_run(_model(_effect("coupling", "input"), _effect("rate", "input")),
+                                        ref.meta, knobs=knobs, dt=0.01)
+    assert not any("second-order" in w for w in plain.warnings)
