@@ -22,6 +22,8 @@ from dataclasses import dataclass
 from typing import Mapping
 
 import numpy as np
+from scipy.optimize import least_squares
+from threadpoolctl import threadpool_limits
 
 from .effects.base import Effect, Signals
 from .identify import tip as T
@@ -75,6 +77,21 @@ def applies(eff: Effect) -> bool:
     return eff.type.driver in DRIVERS and eff.spec_form.stage in STAGES
 
 
+MAX_NFEV = 30
+"""Evaluations of each local refinement (it starts from a neighbouring loop: a few suffice)."""
+
+
+def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float):
+    # the identification's own local refinement (:func:`hystcli.identify.tip._refine`), shorter
+    inner = np.where(np.isfinite(T._HI), 1e-7, 0.0)
+    th0 = np.minimum(np.maximum(np.asarray(th0, float), T._LO + inner), T._HI - inner)
+    span = float(np.ptp(q)) or 1.0
+    x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1, max(1.0, f_scale), 0.05 * span])
+    with threadpool_limits(limits=1):
+        return least_squares(T._residuals, th0, jac=T._residual_jacobian, bounds=(T._LO, T._HI), args=(q, y),
+                             loss="soft_l1", f_scale=f_scale, x_scale=x_scale, max_nfev=MAX_NFEV)
+
+
 def refit(sweep: Sweep, model: Model, eff: Effect, starts: Mapping[int, KnobModel] | None = None,
           cache: dict | None = None) -> dict[int, KnobModel]:
     """Knob models re-identified from the sweep with ``eff`` acting (knobs not in the sweep keep the
@@ -93,11 +110,8 @@ def refit(sweep: Sweep, model: Model, eff: Effect, starts: Mapping[int, KnobMode
         m = (starts or {}).get(k, model.knob(k))
         zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
         th0 = T.theta_from_model(m, zi)
-        r0 = T._residuals(th0, x, y)
-        f_scale = max(3.0 * T._robust_sd(r0), 1e-3)
-        res = T._refine(th0, x, y, f_scale)
-        f_scale = max(3.0 * T._robust_sd(T._residuals(res.x, x, y)), 1e-3)
-        res = T._refine(res.x, x, y, f_scale)
+        f_scale = max(3.0 * T._robust_sd(T._residuals(th0, x, y)), 1e-3)
+        res = _refine(th0, x, y, f_scale)
         out[k] = T.model_of(res.x).with_offset(model.knob(k).offset)
         if cache is not None:
             cache[key] = out[k]
