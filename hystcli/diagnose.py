@@ -753,6 +753,11 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         Seed of the bootstrap.
     progress : callable, optional
         Called with a short message at each step.
+    sweep : Run, optional
+        The model's identification sweep. A time-dependent effect (a lag, latency, creep) is in
+        it too, and a fast sweep turns it into a wider, steeper identified loop; with the sweep,
+        those candidates bring the loop re-identified from it with the effect acting
+        (:mod:`hystcli.refit`), and a chosen one replaces the model's loop.
 
     Returns
     -------
