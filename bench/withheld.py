@@ -41,6 +41,10 @@ from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
+SWEEP = os.environ.get("HYST_WITHHELD_SWEEP", "1") != "0"
+"""Diagnose with the identification sweep (``diagnose(..., sweep=)``, ``hyst diagnose --sweep``):
+a time-dependent effect is in the sweep too, and its loop is re-identified under it."""
+
 NAME = {"lag": "rate"}
 """Zoo effect names that differ from ours."""
 
@@ -92,7 +96,7 @@ def run_case(seed: int, effects: tuple) -> dict:
     seen = [r for i, r in enumerate(runs) if i not in held]
     test = [runs[i] for i in held]
     t1 = time.perf_counter()
-    d = diagnose(model, seen)
+    d = diagnose(model, seen, sweep=sweep if SWEEP else None)
     t_diag = time.perf_counter() - t1
     chosen = [s.name for s in d.selected]
     before = after = 0.0

@@ -59,6 +59,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import attribution as A
+from . import refit as R
 from . import effects as E
 from . import search as S
 from .compensation import knobs_of
@@ -421,11 +422,15 @@ def _effects(fixed: Sequence[E.Effect], chosen) -> tuple[E.Effect, ...]:
 
 
 def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[EffectType], max_effects: int,
-            progress: Callable[[str], None] | None = None, tables: dict | None = None):
+            progress: Callable[[str], None] | None = None, tables: dict | None = None, loops=None):
     """Greedy forward selection over effect families (each family's forms form one grid).
 
     ``tables`` caches the first round's SSE tables (they do not depend on the run weights, so the
-    bootstrap's resamples reuse them)."""
+    bootstrap's resamples reuse them). ``loops(etype, grid)``: per grid point the knob models
+    re-identified from the sweep with that effect acting (None: the model's own), for the first
+    effect chosen: when it is one of those, the rounds after it and the returned knobs use its
+    loop. Returns the rounds, the chosen effects, each fold's starts, the knobs (None: the
+    model's) and each fold's knobs."""
     n_run = np.array([float(p.n) for p in preps])
     n_eff = float(w @ n_run)
     base_sse = np.array([p.sse(tuple(fixed)) for p in preps])
@@ -436,6 +441,7 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
     fold_starts: list[list[tuple[EffectType, str, dict]]] = [[] for _ in folds]
     n_params = 0
     n_held = sum(float(w[test] @ np.array([preps[i].n for i in test])) for _, test in folds)
+    knobs, fold_knobs = None, [None] * len(folds)
     for rnd in range(max(int(max_effects), 0)):
         base_effs = _effects(fixed, chosen)
         base_held = sum(float(w[test] @ base_sse[test]) for _, test in folds)
@@ -449,9 +455,11 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
             if progress:
                 progress(f"round {rnd + 1}: candidate {etype.name}")
             grid = S.family_grid(etype)
+            lp = loops(etype, grid) if (loops is not None and rnd == 0) else None
             T = tables.get(etype.name) if (tables is not None and rnd == 0) else None
             if T is None:
-                T = S.table(preps, base_effs, base_sse, etype, grid)
+                T = S.table(preps, base_effs, base_sse, etype, grid) if lp is None else \
+                    S.table_loops(preps, base_effs, base_sse, etype, grid, lp)
                 if tables is not None and rnd == 0:
                     tables[etype.name] = T
             nd = S.null_distance(etype, grid)
@@ -467,14 +475,16 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
             rmse_h = math.sqrt(held / n_held) if n_held > 0 else math.nan
             starts = [(etype, *_at(etype, grid, pk)) for pk in picks]
             rows.append([etype, form, params, rmse_h, _shrink(rmse_b, rmse_h), bic - bic0, aic - aic0, k,
-                         starts, sse_j])
+                         starts, sse_j, None if lp is None else (lp[j], [lp[pk[0]] for pk in picks])])
         if not rows:
             break
         rows.sort(key=lambda r: (r[5] >= 0, r[3]))
         best = rows[0]
         # refine the leader's parameters on all runs (the others keep their grid fit: the ranking
         # is by held-out RMSE, which the grid already gives)
-        fitted, sse, _ = S.fit(preps, w, base_effs, [(best[0], best[1], best[2])])
+        # (not one that brings its own loop: the grid's loop belongs to the grid's point)
+        fitted, sse, _ = S.fit(preps, w, base_effs, [(best[0], best[1], best[2])]) if best[10] is None \
+            else (None, math.inf, None)
         if math.isfinite(sse) and sse < best[9]:
             best[2] = dict(fitted[0][2])
             bic, aic = _ic(sse, n_eff, n_params + best[7])
@@ -488,6 +498,11 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
         chosen.append((best[0], best[1], dict(best[2])))
         for f, start in enumerate(best[8]):
             fold_starts[f].append(start)
+        if best[10] is not None:
+            # the effect came with the loop re-identified under it: every later round builds on that
+            knobs, fold_knobs = best[10]
+            if knobs is not None:
+                preps = [S.with_knobs(p, knobs) for p in preps]
         n_params += best[7]
         # the chosen effects are refitted jointly on all runs before the next round
         if len(chosen) > 1:
@@ -495,7 +510,7 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
             chosen = [(et, fm, dict(p)) for et, fm, p in chosen]
         effs = _effects(fixed, chosen)
         base_sse = np.array([p.sse(effs) for p in preps])
-    return rounds, chosen, fold_starts
+    return rounds, chosen, fold_starts, knobs, fold_knobs
 
 # --------------------------------------------------------------------------------------------
 # WHERE
@@ -713,7 +728,7 @@ def _validate(model: Model, runs: Sequence[Run]) -> list[str]:
 # --------------------------------------------------------------------------------------------
 def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
              candidates: Sequence[str] | None = None, max_effects: int = 3, bootstrap: int = 0,
-             seed: int = 0, progress: Callable[[str], None] | None = None) -> Diagnosis:
+             seed: int = 0, progress: Callable[[str], None] | None = None, sweep: Run | None = None) -> Diagnosis:
     """Where the model departs from measurement, which effect causes it, how far adding it helps.
 
     Parameters
@@ -738,6 +753,11 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         Seed of the bootstrap.
     progress : callable, optional
         Called with a short message at each step.
+    sweep : Run, optional
+        The model's identification sweep. A time-dependent effect (a lag, latency, creep) is in
+        it too, and a fast sweep turns it into a wider, steeper identified loop; with the sweep,
+        those candidates bring the loop re-identified from it with the effect acting
+        (:mod:`hystcli.refit`), and a chosen one replaces the model's loop.
 
     Returns
     -------
@@ -776,10 +796,41 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     with threadpool_limits(limits=1):
         # one BLAS thread: the work is many small products, and the machine is shared
         return _diagnose(model, runs, names, base, cands, folds, scheme, int(max_effects), int(bootstrap),
-                         seed, progress)
+                         seed, progress, sweep)
 
 
-def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, bootstrap, seed, progress):
+def _loops(model: Model, sweep: Run):
+    """The per-grid-point loops of :func:`_select` (``loops``): for a family whose every form is a
+    time-dependent effect the straight sweep carries (:func:`hystcli.refit.applies`), the knob
+    models re-identified from the sweep with each grid point's effect acting."""
+    sw = R.prepare_sweep(sweep, model)
+    if sw is None:
+        return None
+    done: dict[str, list] = {}
+    cache: dict = {}
+
+    def loops(etype: EffectType, grid) -> list | None:
+        if etype.name in done:
+            return done[etype.name]
+        if not all(etype.driver in R.DRIVERS and f.stage in R.STAGES for f in etype.forms):
+            done[etype.name] = None
+            return None
+        out, prev = [], {}
+        for g in grid:
+            if g.effect is None or g.effect.is_null:
+                out.append(None)
+                continue
+            # along a form's axis each refit starts where its neighbour ended (a continuation)
+            kn = R.refit(sw, model, g.effect, starts=prev.get(g.form), cache=cache)
+            prev[g.form] = kn
+            out.append(kn)
+        done[etype.name] = out
+        return out
+
+    return loops
+
+
+def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, bootstrap, seed, progress, sweep=None):
     fit = [S.prepare(model, r, n, decimate=True) for r, n in zip(runs, names)]
     full = [S.prepare(model, r, n, decimate=False) for r, n in zip(runs, names)]
     w = np.ones(len(runs))
@@ -791,9 +842,20 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
     # the candidates (an effect whose regressors explain more is tried first)
     follows = A.attribute(fit, base, folds, w)
     where = replace(where, follows=follows)
+    before_fit, before_model = fit, model
     families = sorted((E.EFFECTS[n] for n in cands), key=lambda et: -A.score(et, follows))
     tables: dict = {}
-    rounds, chosen, fold_starts = _select(fit, w, folds, base, families, max_effects, progress, tables)
+    loops = _loops(model, sweep) if sweep is not None else None
+    rounds, chosen, fold_starts, knobs, fold_knobs = _select(fit, w, folds, base, families, max_effects, progress,
+                                                             tables, loops)
+    before_full = full
+    if knobs is not None:
+        # the first effect chosen came with its loop, re-identified from the sweep under it
+        model = replace(model, knobs={k: knobs.get(k, kn) for k, kn in model.knobs.items()},
+                        meta={**model.meta, "loop": "re-identified from the sweep with the diagnosed effect"})
+        fit_all, full_all = [S.with_knobs(p, knobs) for p in fit], [S.with_knobs(p, knobs) for p in full]
+    else:
+        fit_all, full_all = fit, full
 
     # HOW FAR: refit the chosen set per fold, predict the held-out runs at full rate
     if progress:
@@ -805,6 +867,12 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
     for f, (train, test) in enumerate(folds):
         wt = np.zeros(len(runs))
         wt[train] = 1.0
+        fit, full = fit_all, full_all
+        if knobs is not None:
+            # the fold's own loop: re-identified under the fold's own pick (the model's when it
+            # picked the effect off)
+            kf = fold_knobs[f] or before_model.knobs
+            fit, full = [S.with_knobs(p, kf) for p in before_fit], [S.with_knobs(p, kf) for p in before_full]
         if chosen:
             # two starts, each fitted on the fold's training runs alone, the better kept: the
             # fold's own grid picks, and the all-run fit (a start only: a coarse grid can put a
@@ -823,7 +891,7 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
         else:
             effs = tuple(base)
         for i in test:
-            before = full[i].predict(base)
+            before = before_full[i].predict(base)
             try:
                 after = full[i].predict(effs)
             except ModelError:
@@ -860,11 +928,12 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
                 bfolds = [(tr, te) for tr, te in folds if wb[te].sum() > 0 and wb[tr].sum() > 0]
                 if bfolds:
                     break
-            _, bchosen, _ = _select(fit, wb, bfolds, base, families, max_effects, tables=tables)
+            _, bchosen, _, _, _ = _select(before_fit, wb, bfolds, base, families, max_effects, tables=tables,
+                                          loops=loops)
             for et, _, _ in bchosen:
                 counts[et.name] = counts.get(et.name, 0) + 1
             if chosen:
-                fitted, _, _ = S.fit(fit, wb, base, chosen)
+                fitted, _, _ = S.fit(fit_all, wb, base, chosen)
                 draws.append(fitted)
         inclusion = {n: counts.get(n, 0) / bootstrap for n in set(counts) | {et.name for et, _, _ in chosen}}
         for j, (et, fm, _) in enumerate(chosen):
@@ -879,8 +948,8 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
                               inclusion.get(et.name) if bootstrap else None, S.make(et, fm, p).spec().form)
                      for et, fm, p in chosen)
     effs_all = _effects(base, chosen)
-    residual = _residual(full, _collect(full, effs_all))
-    left = A.attribute(fit, effs_all, folds, w) if chosen else follows
+    residual = _residual(full_all, _collect(full_all, effs_all))
+    left = A.attribute(fit_all, effs_all, folds, w) if chosen else follows
     specs = tuple(model.effects) + tuple(S.make(et, fm, p).spec() for et, fm, p in chosen)
     meta = dict(model.meta)
     if chosen:

@@ -13,7 +13,7 @@ fights the other processes for them.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Mapping, Sequence
 
 import numpy as np
@@ -190,6 +190,28 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
                 T[i, j] = _sse_from_cut(p, plans[j], steps[j], g.effect, cuts, sigs)
             except ModelError:
                 T[i, j] = math.inf
+    return T
+
+
+def with_knobs(p: Prep, knobs: Mapping[int, KnobModel]) -> Prep:
+    """The run under other knob models (each moved to the run's offset)."""
+    return replace(p, knobs={k: knobs[k].with_offset(p.offsets[k]) for k in p.knobs})
+
+
+def table_loops(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray, etype: EffectType,
+                grid: Sequence[GridPoint], loops: Sequence[Mapping[int, KnobModel] | None]) -> np.ndarray:
+    """As :func:`table`, where grid point ``j`` brings its own knob models ``loops[j]`` (the loop
+    re-identified with the effect acting, :mod:`hystcli.refit`); None keeps the runs' own."""
+    T = table(preps, base, base_sse, etype, [g if lp is None else GridPoint(g.form, g.params, None)
+                                             for g, lp in zip(grid, loops)])
+    base = tuple(base)
+    acts = acting(preps, etype, grid)
+    for j, (g, lp) in enumerate(zip(grid, loops)):
+        if lp is None or g.effect is None or _is_null(etype, g):
+            continue
+        for i, p in enumerate(preps):
+            q = with_knobs(p, lp)
+            T[i, j] = q.sse(base + (g.effect,)) if acts[i, j] else q.sse(base)
     return T
 
 

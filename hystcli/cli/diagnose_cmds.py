@@ -30,6 +30,9 @@ def diagnose_cmd(
     max_effects: Annotated[int, typer.Option("--max-effects", min=0, help="Most effects to add.")] = 3,
     bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over runs for intervals and "
                                                        "inclusion frequencies (0: none).")] = 0,
+    sweep: Annotated[Optional[Path], typer.Option(
+        "--sweep", help="The model's identification sweep (t, q<k>, y<k>): a lag, latency or creep is in it too, "
+                        "so those candidates re-identify the loop from it with the effect acting.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,
@@ -53,7 +56,7 @@ def diagnose_cmd(
         key, eq, value = holdout.partition("=")
         if not (eq and key.strip() and value.strip()):
             usage_error(f"{holdout!r}: expected key=value, e.g. motion=nonperiodic", "--holdout")
-    inputs = [*runs, model_path]
+    inputs = [*runs, model_path] + ([sweep] if sweep is not None else [])
     for out in (output, model_out, plot):
         if out is not None:
             io.check_not_input(out, inputs)
@@ -67,9 +70,10 @@ def diagnose_cmd(
             usage_error(f"unknown effect {unknown[0]!r} (known: {', '.join(EFFECTS)})", "--candidates")
     model = io.load_model(model_path)
     loaded = [io.read_run(p, require=("t",)) for p in runs]
+    sweep_run = io.read_run(sweep, require=("t",)) if sweep is not None else None
     with progress(quiet) as update:
         diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
-                        bootstrap=bootstrap, seed=seed, progress=update)
+                        bootstrap=bootstrap, seed=seed, progress=update, sweep=sweep_run)
     report = diag.report()
     report["model"] = str(model_path)
     png = diagnosis_figure(diag, loaded) if plot is not None else None
