@@ -112,13 +112,15 @@ class CurrentReading:
 
 def _bins(x: np.ndarray, c: np.ndarray, width: float) -> tuple[np.ndarray, np.ndarray]:
     k = np.floor((x - x.min()) / width).astype(np.int64)
-    order = np.argsort(k, kind="stable")
+    # each bin's median at once: sort by (bin, value), then the middle one or two of each run
+    order = np.lexsort((c, k))
     k, cs = k[order], c[order]
-    cuts = np.flatnonzero(np.diff(k)) + 1
-    groups = np.split(cs, cuts)
-    keys = k[np.concatenate([[0], cuts])]
-    centres = x.min() + (keys + 0.5) * width
-    return centres, np.array([float(np.median(g)) for g in groups])
+    starts = np.concatenate([[0], np.flatnonzero(np.diff(k)) + 1])
+    sizes = np.diff(np.concatenate([starts, [k.size]]))
+    lo = starts + (sizes - 1) // 2
+    hi = starts + sizes // 2
+    centres = x.min() + (k[starts] + 0.5) * width
+    return centres, 0.5 * (cs[lo] + cs[hi])
 
 
 SLOW = 0.25
