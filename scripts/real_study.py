@@ -113,10 +113,40 @@ _RUNS: dict[tuple[str, str], Run] = {}
 _IDENT: dict[tuple[str, str], tuple[Model, float]] = {}
 
 
+RAW = ROOT.parent / "shared" / "real" / "mrdlab"
+BE_NM_PER_COUNT = 3.9811e-5  # the back-end torque sensor (PROVENANCE.md, column 3)
+# what a run's ``condition`` is: "torque" (its measured mean back-end torque, mN m; over the
+# first ``cycles`` input cycles after SETTLE_S, 0: the whole rest of the file) or "load" (the
+# nominal level, %, as the import sets it)
+DRIVER = {"name": "torque", "cycles": 0.0}
+
+
+def back_end_torque(series: str, name: str) -> float:
+    """Mean back-end (input spindle) torque after the load came on (mN m), from the original file."""
+    import gzip
+
+    rows = []
+    with gzip.open(RAW / series / (Path(name).stem + ".TXT.gz"), "rt") as fh:
+        for line in fh:
+            if line.strip() and not line.startswith("%"):
+                f = line.split(",")
+                rows.append((float(f[0]), float(f[2])))
+    a = np.array(rows)
+    cyc = DRIVER["cycles"]
+    keep = a[:, 0] >= SETTLE_S
+    if cyc > 0:
+        f = float(read_run(REAL / series / name).meta["frequency_hz"])
+        keep &= a[:, 0] < SETTLE_S + cyc / f
+    return float(a[keep, 1].mean()) * BE_NM_PER_COUNT * 1000.0
+
+
 def run_of(series: str, name: str) -> Run:
     key = (series, name)
     if key not in _RUNS:
-        _RUNS[key] = read_run(REAL / series / name)
+        run = read_run(REAL / series / name)
+        if DRIVER["name"] == "torque":
+            run = replace(run, meta={**run.meta, "condition": f"{back_end_torque(series, name):.2f}"})
+        _RUNS[key] = run
     return _RUNS[key]
 
 
@@ -264,7 +294,13 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--no-diagnose", action="store_true", help="leave column (c) and the diagnoses out")
     ap.add_argument("--out", default=str(REAL / "STUDY.md"))
+    ap.add_argument("--driver", choices=("load", "torque"), default="torque",
+                    help="a run's condition: its measured mean back-end torque (default) or its nominal load")
+    ap.add_argument("--torque-cycles", type=float, default=0.0,
+                    help="average the back-end torque over this many input cycles after the settling "
+                         "time (default 0: the whole rest of the file)")
     args = ap.parse_args(argv)
+    DRIVER.update(name=args.driver, cycles=args.torque_cycles)
     with_c = not args.no_diagnose
     t0 = time.time()
 
