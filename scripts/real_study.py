@@ -575,7 +575,13 @@ def render(anat, rows, totals, series_totals, per_file, diags, with_c: bool) -> 
              "error, as its own torque line under-predicts the step. The study design looked at "
              "pitch_2 and pitch_5 (the rows that kept the means up) to find this; the rule, the "
              "measured torque as every run's condition, is the same for every condition, but these "
-             "data have no further held-out set to confirm it on.")
+             "data have no further held-out set to confirm it on. The chosen term is a crude stand-in: "
+             "a dead zone centre moving with the condition pivots at zero torque, not at the "
+             "identification file's torque, so it also moves the identification file's own "
+             "prediction (by about 0.03 deg per mN m); a stretch referenced to the identification "
+             "file's torque is the physics, but two files of one condition cannot identify its "
+             "reference, and within a condition the term's own leave-one-run-out RMSE (section 3) "
+             "mostly gets worse: its gain in (c) comes from the median over the other pitches.")
     if with_c:
         c80 = [r["c"] for (tb, se, n), r in per_file.items() if tb == "load" and n == "003.csv"]
         comp = [s.params["compliance"] for d in diags.values() for s in d.chosen if s.name == "stretch"
