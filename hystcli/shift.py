@@ -70,10 +70,6 @@ ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
 
-KINK_WINDOW = 80
-"""Readings (the latest) a loading edge is read on: 40 deg of travel at the default 0.5 deg step,
-more dead zone than any edge needs before it; longer stretches cost no more per step."""
-
 LOAD = "load"
 
 
@@ -705,10 +701,7 @@ class _Search:
                     continue
                 sig = _reading_noise(c)
                 sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
-                # the kink is read on the last KINK_WINDOW readings: enough dead zone before any
-                # edge, and a step's cost that stops growing with a long stretch
-                kink = loading_edge(q[-KINK_WINDOW:], c[-KINK_WINDOW:], self.dir, sig, minlen=2,
-                                    resolution=self.u / 25.0)
+                kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
                 # a start in the dead zone that has been loading from the first reading (no kink
                 # out of a flat stretch): a tendon was taut after all
                 if (kink is None and self.seg_from_start and not self.start_outside
