@@ -22,7 +22,12 @@ import numpy as np
 from .base import EffectType, Form
 
 _MU = dict(params=("mu",), units=("1/rad",), switch="mu", null=0.0, typical={"mu": 0.3},
-           bounds={"mu": (0.0, 1.0)}, domain={"mu": (0.0, 5.0)}, axes={"mu": np.linspace(0.0, 1.0, 21)})
+           bounds={"mu": (0.0, 1.0)}, domain={"mu": (0.0, 5.0)},
+           axes={"mu": np.concatenate([[0.0], np.geomspace(0.005, 1.0, 21)])})
+"""The search grid of mu is geometric from 0.005: a weak sheath friction is a few hundredths
+(g = 1.05 over a 90-degree bend moves the tip a degree), where a linear grid of 0.05 steps had
+only its first point, with no neighbour to interpolate towards off; the fit stuck there and lost
+to a dead-zone width, which moves the edges without changing the loaded slope."""
 
 
 class Friction(EffectType):
