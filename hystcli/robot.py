@@ -280,6 +280,51 @@ def check_trajectory(device: Device, trajectory: Any, limits: Limits = Limits(),
     return require_within(check, allow=("speed", "accel") if allow_fast else (), name=name)
 
 
+class _Pacer:
+    """Sends sample ``i`` at ``t[i] - t[0]`` after :meth:`start` (``paced``), keeping the worst lag."""
+
+    def __init__(self, paced: bool, clock: Callable[[], float], sleep: Callable[[float], None]) -> None:
+        self.paced, self.clock, self.sleep = paced, clock, sleep
+        self.t0 = self.origin = 0.0
+        self.max_lag = 0.0
+
+    def start(self, t0: float) -> None:
+        self.t0, self.origin = t0, self.clock()
+
+    def wait(self, t: float) -> None:
+        if not self.paced:
+            return
+        lag = self.clock() - (self.origin + (t - self.t0))
+        if lag < 0:
+            self.sleep(-lag)
+        else:
+            self.max_lag = max(self.max_lag, lag)
+
+
+def _send_row(device: Device, info: DeviceInfo, knobs: Iterable[int], q: Any, prev: Any, dt: float,
+              lim: Limits, *, allow_fast: bool, min_speed: float, i: int, t: float) -> tuple[list, list, int]:
+    """One sample's MOVE per knob, each at the speed that covers its step in ``dt`` (``prev``: the
+    previous commands, or None for the first sample): (currents, tip angles, steps capped at the
+    speed limit). A step beyond the limit is sent at the limit with ``allow_fast``, else refused."""
+    c_row, y_row, capped = [], [], 0
+    for j, k in enumerate(knobs):
+        speed = abs(q[j] - prev[j]) / dt if prev is not None else 0.0
+        if speed > lim.max_speed:
+            if not allow_fast:
+                raise SafetyStop(f"knob {k} would move at {speed:.1f} deg/s at t={t:g} s, beyond "
+                                 f"the speed limit {lim.max_speed:g} deg/s (--allow-fast sends such "
+                                 "steps at the limit)")
+            speed = lim.max_speed
+            capped += 1
+        s = device.move(k, q[j], max(speed, min_speed))
+        c_row.append(s.current)
+        if info.tracker:
+            if s.tip is None:
+                raise LinkError(f"device {info.name} announced a tracker but sent no tip angle at sample {i}")
+            y_row.append(s.tip)
+    return c_row, y_row, capped
+
+
 def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
                     limits: Limits = Limits(), allow_fast: bool = False,
                     return_on_abort: bool = True, move_speed: float | None = None,
@@ -353,37 +398,25 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     n = len(t)
     c = {k: np.empty(n) for k in knobs}
     y = {k: np.empty(n) for k in knobs} if info.tracker else {}
-    max_lag = 0.0
+    pacer = _Pacer(paced, clock, sleep)
     capped = 0
     starts = {k: device.state(k).angle for k in knobs}
     try:
         for k in knobs:
             device.move(k, qs[k][0], v_move)
-        start = clock()
-        prev = {k: qs[k][0] for k in knobs}
+        pacer.start(t[0])
         for i in range(n):
             dt = t[i] - t[i - 1] if i else t[1] - t[0]
-            if paced:
-                due = start + (t[i] - t[0])
-                lag = clock() - due
-                if lag < 0:
-                    sleep(-lag)
-                else:
-                    max_lag = max(max_lag, lag)
-            for k in knobs:
-                q = qs[k][i]
-                speed = max(abs(q - prev[k]) / dt, min_speed)
-                if speed > lim.max_speed:  # only with allow_fast: the check refused it otherwise
-                    speed = lim.max_speed
-                    capped += 1
-                s = device.move(k, q, speed)
-                prev[k] = q
-                c[k][i] = s.current
+            pacer.wait(t[i])
+            # the check refused any step beyond the speed limit unless allow_fast
+            c_row, y_row, n_capped = _send_row(
+                device, info, knobs, [qs[k][i] for k in knobs], [qs[k][i - 1] for k in knobs] if i else None,
+                dt, lim, allow_fast=allow_fast, min_speed=min_speed, i=i, t=t[i])
+            capped += n_capped
+            for j, k in enumerate(knobs):
+                c[k][i] = c_row[j]
                 if info.tracker:
-                    if s.tip is None:
-                        raise LinkError(f"device {info.name} announced a tracker but sent no "
-                                        f"tip angle at sample {i}")
-                    y[k][i] = s.tip
+                    y[k][i] = y_row[j]
             if progress is not None:
                 progress(i + 1, n)
     except BaseException as exc:
@@ -402,7 +435,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     meta = dict(run.meta)
     meta.update(info.as_meta())
     meta["play_timing"] = "paced" if paced else "fast"
-    meta["play_max_lag_s"] = f"{max_lag:.4f}"
+    meta["play_max_lag_s"] = f"{pacer.max_lag:.4f}"
     meta["play_peak_speed"] = f"{max(m.peak_speed for m in check.knobs.values()):.4g}"
     meta["play_speed_limit"] = f"{lim.max_speed:g}"
     meta["play_speed_capped"] = str(capped)

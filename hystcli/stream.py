@@ -97,25 +97,22 @@ class _Hysteresis:
         if self.fresh:
             self._start(other)
         y = self.y
+        if r == y:
+            return self.x
+        # the dead-zone edges as the other knob moves them this sample (coupling)
+        b = a = 0.0
+        if other is not None:
+            for e in self.edges:
+                dp, dn = e.type.edges_at(e, other, self.other_offset)
+                b += dp
+                a += dn
         if r > y:
-            b = a = 0.0
-            if other is not None:
-                for e in self.edges:
-                    dp, dn = e.type.edges_at(e, other, self.other_offset)
-                    b += dp
-                    a += dn
             if r > self.h_pos:
                 self.x = self.d_pos + b + (r - self.h_pos) / self.omega + self.offset
             else:
                 self.x = self.dhat_pos + a + (r - self.h_pos) / self.omega + self.offset
             self.y = r
         elif r < y:
-            b = a = 0.0
-            if other is not None:
-                for e in self.edges:
-                    dp, dn = e.type.edges_at(e, other, self.other_offset)
-                    b += dp
-                    a += dn
             if r < self.h_neg:
                 self.x = self.d_neg + a + (r - self.h_neg) / self.omega + self.offset
             else:

@@ -237,7 +237,8 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     hystcli.robot.Interrupted
         Ctrl-C while moving (likewise).
     """
-    from .robot import _hold_statement, _reraise_with, _return_knobs, check_trajectory, effective_limits
+    from .robot import (_hold_statement, _Pacer, _reraise_with, _return_knobs, _send_row, check_trajectory,
+                        effective_limits)
 
     info = device.info or device.hello()
     knobs = tuple(reference.knobs)
@@ -271,7 +272,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     cost: list[float] = []
     shift_results: dict = {}
     starts = {k: device.state(k).angle for k in knobs}
-    max_lag = 0.0
+    pacer = _Pacer(paced, clock, sleep)
     capped = 0
     perf = time.perf_counter
     try:
@@ -294,7 +295,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
 
         def emit(q: tuple) -> None:
             # send the command of sample len(qs) at its time; record the robot's answer
-            nonlocal max_lag, capped, start
+            nonlocal capped
             i = len(qs)
             t_i = ts[i]
             for j, k in enumerate(knobs):
@@ -304,40 +305,19 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
             if i == 0:
                 for j, k in enumerate(knobs):
                     device.move(k, q[j], v_move)   # untimed, to the first command
-                start = clock()
-            elif paced:
-                lag = clock() - (start + (t_i - ts[0]))
-                if lag < 0:
-                    sleep(-lag)
-                else:
-                    max_lag = max(max_lag, lag)
-            step_dt = t_i - ts[i - 1] if i else dt
-            c_row, y_row = [], []
-            for j, k in enumerate(knobs):
-                speed = abs(q[j] - qs[-1][j]) / step_dt if i else 0.0
-                if speed > lim.max_speed:
-                    if not allow_fast:
-                        raise SafetyStop(f"knob {k} would move at {speed:.1f} deg/s at t={t_i:g} s, beyond "
-                                         f"the speed limit {lim.max_speed:g} deg/s (--allow-fast sends such "
-                                         "steps at the limit)")
-                    speed = lim.max_speed
-                    capped += 1
-                s = device.move(k, q[j], max(speed, min_speed))
-                c_row.append(s.current)
-                if info.tracker:
-                    if s.tip is None:
-                        from .errors import LinkError
-
-                        raise LinkError(f"device {info.name} announced a tracker but sent no tip "
-                                        f"angle at sample {i}")
-                    y_row.append(s.tip)
+                pacer.start(t_i)
+            else:
+                pacer.wait(t_i)
+            c_row, y_row, n_capped = _send_row(device, info, knobs, q, qs[-1] if i else None,
+                                               t_i - ts[i - 1] if i else dt, lim, allow_fast=allow_fast,
+                                               min_speed=min_speed, i=i, t=t_i)
+            capped += n_capped
             qs.append(tuple(q))
             cs.append(tuple(c_row))
             ys.append(tuple(y_row))
             if progress is not None:
                 progress(len(qs))
 
-        start = 0.0
         one = len(knobs) == 1
         for source in (head, rows):
             for t, r in source:
@@ -376,7 +356,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     meta.pop("shift_ignored", None)
     meta.update(info.as_meta())
     step_us = float(np.median(cost) * 1e6) if cost else 0.0
-    meta.update({"track_timing": "paced" if paced else "fast", "track_max_lag_s": f"{max_lag:.4f}",
+    meta.update({"track_timing": "paced" if paced else "fast", "track_max_lag_s": f"{pacer.max_lag:.4f}",
                  "track_latency": latency, "track_lookahead": str(comp.lookahead),
                  "track_speed_limit": f"{lim.max_speed:g}", "track_speed_capped": str(capped),
                  "track_step_us": f"{step_us:.2f}"})
