@@ -472,7 +472,9 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
             form, params = _at(etype, grid, (j, x))
             k = _n_fit(etype, form, params)
             bic, aic = _ic(sse_j, n_eff, n_params + k)
-            rmse_h = math.sqrt(held / n_held) if n_held > 0 else math.nan
+            # a held-out run the candidate cannot predict (non-finite: held as 1e300 so that
+            # ranking puts it last) has no RMSE: inf, reported as "-", never as a number
+            rmse_h = math.nan if n_held <= 0 else (math.inf if held >= 1e299 else math.sqrt(held / n_held))
             starts = [(etype, *_at(etype, grid, pk)) for pk in picks]
             rows.append([etype, form, params, rmse_h, _shrink(rmse_b, rmse_h), bic - bic0, aic - aic0, k,
                          starts, sse_j, None if lp is None else (lp[j], [lp[pk[0]] for pk in picks])])

@@ -257,7 +257,8 @@ def diagnose_condition(cond: Condition) -> Diag:
         warnings.simplefilter("ignore", RuntimeWarning)
         d = diagnose(model, runs)
     chosen = tuple(s.effect().spec() for s in d.selected)
-    top = ", ".join(f"{c.name} {c.gain_pct:+.0f} %" for c in d.ranking[:3])
+    top = ", ".join(f"{c.name} {c.gain_pct:+.0f} %" if math.isfinite(c.gain_pct)
+                    else f"{c.name} (breaks a held-out run)" for c in d.ranking[:3])
     return Diag(cond, chosen, d.how_far.rmse_before, d.how_far.rmse_after, d.verdict, top)
 
 
