@@ -337,3 +337,42 @@ def test_plot_identification_writes_a_png(tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["fit.png"]  # no temporary left behind
     with pytest.raises(DataError, match="does not exist"):
         plot_identification(run, res, tmp_path / "missing" / "fit.png")
+
+
+# independent plants (hystcli.zoo.plants, written without reading identify) whose tip meets a
+# rigid wall on one side; seeds of its design set. The wall's level is the plant's, not ours.
+WALL_SEEDS = (7, 32, 33, 39, 124, 161, 179, 292)
+
+
+@pytest.mark.parametrize("seed", WALL_SEEDS)
+def test_a_wall_that_holds_the_tip_is_censored_and_the_free_loop_recovered(seed):
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(seed)
+    assert case.family == "wall"
+    fit = identify(parse_run(case.record.csv_text(), source="wall")).fits[1]
+    truth = case.truth.as_dict()
+    # the plant's truth is its free tip's loop (plants.py: "The true parameters are those of the
+    # free tip"); before the censoring these fits were refused, or off by 0.6-9 deg
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert abs(getattr(fit.model, name) - truth[name]) <= 0.5, (seed, name)
+    assert any("a wall holds the tip" in w for w in fit.warnings)
+    # the level the warning names is within a few noise sigmas of the plant's wall
+    from hystcli.identify.tip import wall_levels
+
+    lvl = [v for v in wall_levels(fit.tip.walls, np.asarray(case.record.columns["y1"], float)) if v is not None]
+    assert len(lvl) == 1 and abs(lvl[0] - case.factors["wall_y"]) <= 4 * max(case.factors["noise_y"], 0.1) + 0.5
+
+
+def test_no_wall_on_a_free_loop_or_a_dead_zone_flat():
+    from hystcli.identify.tip import find_walls
+
+    # a free loop: the tip rises with the knob up to each reversal
+    run = ice_a_run(-40, 40)
+    q, y = np.asarray(run["q1"]), np.asarray(run["y1"])
+    assert find_walls(q, y, 0.1) == (None, None)
+    # a sweep that never passes d_pos ends each rise on the dead zone's flat: the same shape as a
+    # wall, but the plain fit explains it, so identify never censors it and still says why
+    with pytest.raises(IdentificationError, match="d_pos .*never moves the tip positive past the dead zone"):
+        identify(ice_a_run(-40, 8))

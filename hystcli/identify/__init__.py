@@ -32,7 +32,8 @@ from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
 from .current import CurrentReading, read_current
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
-from .tip import TipFit, bootstrap_tip, fit_tip, z_path
+from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, wall_levels, z_path
+from .tip import predict as tip_predict
 
 __all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "current_levels", "find_reversals",
            "identify", "plot_identification"]
@@ -43,6 +44,13 @@ MAX_MISFIT = 0.6
 a quarter second) that identify accepts; beyond it the tip does something the model lacks.
 Measured: 0.51 on the twin's sample sweeps (their creep and lag), at most 0.26 on the real
 EndoWrist files, 0.7-3.2 on independent plants whose tip meets a wall."""
+
+WALL_MISFIT = 0.1
+"""Systematic misfit (deg RMS, as :data:`MAX_MISFIT`) above which identify looks for a wall that
+holds the tip (:func:`hystcli.identify.tip.find_walls`). Measured on the independent plants
+with a wall (design seeds 0-599 of ``hystcli.zoo.plants``): 0.11-3.2 deg of plain-fit misfit,
+0.00-0.07 once the samples at the wall are censored; free loops fit to a few hundredths, the
+twin's sample sweeps (creep, lag) to 0.5, where no wall is found."""
 
 SLIDES_WITH = {"d_pos": ("d_pos", "h_pos", "b_pos", "b_neg"), "d_neg": ("d_neg", "h_neg", "b_pos", "b_neg")}
 """Parameters that move with an edge the record cannot place (its flat too narrow to see)."""
@@ -239,7 +247,27 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     if tip:
         y = np.asarray(run[yname], float)
         starts = ()
+        fs = run.sample_rate if "t" in run else 1.0
         fit = fit_tip(q, y, starts, keep=chk.reversals)
+        misfit = systematic_misfit(fit.model.forward(q, float(y[0])) - y, fs)
+        if misfit > WALL_MISFIT:
+            # a wall (or a hard limit) that holds the tip while the knob drives on: fit the free
+            # loop with the samples at the wall censored, and keep it when it explains the record
+            # (below MAX_MISFIT a wall still biases the loop by a degree or two: the fit bends
+            # the loop toward the wall's level)
+            walls = find_walls(q, y, fit.noise)
+            if walls != (None, None):
+                wfit = fit_tip(q, y, starts, keep=chk.reversals, walls=walls)
+                free = tip_predict(wfit.theta, q)
+                wmis = systematic_misfit(at_walls(free, walls, y) - y, fs)
+                held = [(free[y >= top] > top).mean() for top in walls[1:] if top is not None]
+                held += [(free[y <= bottom] < bottom).mean() for bottom in walls[:1] if bottom is not None]
+                if wmis <= MAX_MISFIT and wmis < 0.5 * misfit and min(held) >= 0.5:
+                    fit, misfit = wfit, wmis
+                    where_wall = " and ".join(f"at {lvl:+.2f} deg" for lvl in wall_levels(walls, y) if lvl is not None)
+                    warnings.append(f"{where_k}: a wall holds the tip {where_wall} while the knob drives on: "
+                                    "those samples only bound the loop (censored); the model is the free tip's, "
+                                    "hyst diagnose can add the contact")
         if fit.unidentified and not refuse_unfixed:
             for name, why in fit.unidentified.items():
                 warnings.append(f"{where_k}: the record cannot fix {name} ({why}): kept as fitted, "
@@ -249,7 +277,6 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                 f"{where_k}: the record cannot fix " + "; ".join(
                     f"{name} ({why})" for name, why in fit.unidentified.items()))
         model, stderr = fit.model, {n: v for n, v in fit.stderr.items() if n not in fit.unidentified}
-        misfit = systematic_misfit(fit.model.forward(q, float(y[0])) - y, run.sample_rate if "t" in run else 1.0)
         if misfit > max_misfit:
             raise IdentificationError(
                 f"{where_k}: the tip departs from the dead-zone + backlash loop by {misfit:.2f} deg RMS over "

@@ -97,15 +97,18 @@ def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
 
 
 @njit(cache=True)
-def _batch_kernel(q, y, cands, out):
+def _batch_kernel(q, y, wt, cands, out):
     # SSE after the best (h_mid, omega >= 1e-3) of every candidate geometry, best of three
-    # initial states (at the ascending envelope, the descending one, midway)
-    n = q.shape[0]
+    # initial states (at the ascending envelope, the descending one, midway); sample weights
+    # wt are 1, or 0 for a sample at a wall (censored: the recursion runs through it, the fit
+    # does not see it)
+    n = 0.0
     syy = 0.0
     sy = 0.0
-    for i in range(n):
-        sy += y[i]
-        syy += y[i] * y[i]
+    for i in range(q.shape[0]):
+        n += wt[i]
+        sy += wt[i] * y[i]
+        syy += wt[i] * y[i] * y[i]
     for m in range(cands.shape[0]):
         dn = cands[m, 0]
         dp = cands[m, 1]
@@ -129,7 +132,7 @@ def _batch_kernel(q, y, cands, out):
             sz = 0.0
             szz = 0.0
             szy = 0.0
-            for i in range(n):
+            for i in range(q.shape[0]):
                 u = q[i]
                 lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
                 hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
@@ -137,9 +140,9 @@ def _batch_kernel(q, y, cands, out):
                     z = lo
                 if z > hi:
                     z = hi
-                sz += z
-                szz += z * z
-                szy += z * y[i]
+                sz += wt[i] * z
+                szz += wt[i] * z * z
+                szy += wt[i] * z * y[i]
             den = n * szz - sz * sz
             if den > 1e-12 * n * n:
                 w = (n * szy - sz * sy) / den
@@ -306,14 +309,29 @@ def _linear_part(z: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     return float(h_mid), float(max(omega, 1e-3))
 
 
-def _start_from_geometry(g, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+Censor = tuple  # (at_top, top, at_bottom, bottom): samples at a wall and the level they are held to
+
+
+def censor_of(y: np.ndarray, walls: tuple[float | None, float | None]) -> Censor | None:
+    """Which samples of ``y`` sit at a wall ``(bottom, top)`` (tip levels, deg; None: no wall on
+    that side): the measured tip there says only that the free loop is beyond the wall."""
+    bottom, top = walls
+    if bottom is None and top is None:
+        return None
+    at_top = y >= top if top is not None else np.zeros(y.size, bool)
+    at_bottom = y <= bottom if bottom is not None else np.zeros(y.size, bool)
+    return at_top, top, at_bottom, bottom
+
+
+def _start_from_geometry(g, q: np.ndarray, y: np.ndarray, free: np.ndarray | None = None) -> np.ndarray:
     dn, dp, bp, bn, dh = map(float, g)
     span = max(dp - dn + dh, 1e-9)
     best = None
     for zi in _initial_states(q[0], g):
         z = z_path(q, g, zi)
-        h_mid, omega = _linear_part(z, y)
-        sse = float(np.sum((y - h_mid - omega * z) ** 2))
+        zf, yf = (z, y) if free is None else (z[free], y[free])
+        h_mid, omega = _linear_part(zf, yf)
+        sse = float(np.sum((yf - h_mid - omega * zf) ** 2))
         if best is None or sse < best[0]:
             best = (sse, np.array([dn, dp - dn, min(bp / span, 1.0), min(bn / span, 1.0), dh,
                                    omega, h_mid, zi]))
@@ -343,11 +361,20 @@ def _distinct_best(cands: np.ndarray, sse: np.ndarray, k: int, span: float) -> l
 # --------------------------------------------------------------------------------------------
 # the local fit
 # --------------------------------------------------------------------------------------------
-def _residuals(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
-    return predict(th, q) - y
+def _residuals(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | None = None) -> np.ndarray:
+    p = predict(th, q)
+    r = p - y
+    if cens is not None:
+        # at a wall the free loop must reach the wall: only falling short of it is an error
+        at_top, top, at_bottom, bottom = cens
+        if top is not None:
+            r[at_top] = np.minimum(p[at_top] - top, 0.0)
+        if bottom is not None:
+            r[at_bottom] = np.maximum(p[at_bottom] - bottom, 0.0)
+    return r
 
 
-def _residual_jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarray:
+def _residual_jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | None = None) -> np.ndarray:
     """Exact d(residual)/d(theta), (n, 8), from the recursion's sensitivities."""
     z = np.empty(q.size)
     jz = np.empty((q.size, 6))
@@ -358,16 +385,24 @@ def _residual_jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray) -> np.ndarr
     jac[:, 5] = z
     jac[:, 6] = 1.0
     jac[:, 7] = omega * jz[:, 5]
+    if cens is not None:
+        at_top, top, at_bottom, bottom = cens
+        p = th[6] + omega * z
+        if top is not None:
+            jac[at_top & (p > top)] = 0.0
+        if bottom is not None:
+            jac[at_bottom & (p < bottom)] = 0.0
     return jac
 
 
-def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float, loss: str = "soft_l1"):
+def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float, loss: str = "soft_l1",
+            cens: Censor | None = None):
     inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
     th0 = np.minimum(np.maximum(np.asarray(th0, float), _LO + inner), _HI - inner)
     span = float(np.ptp(q)) or 1.0
     x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1,
                         max(1.0, f_scale), 0.05 * span])
-    return least_squares(_residuals, th0, jac=_residual_jacobian, bounds=(_LO, _HI), args=(q, y),
+    return least_squares(_residuals, th0, jac=_residual_jacobian, bounds=(_LO, _HI), args=(q, y, cens),
                          loss=loss, f_scale=f_scale, x_scale=x_scale, max_nfev=400)
 
 
@@ -423,6 +458,9 @@ class TipFit:
         prediction hardly depends on where they are; each with the reason.
     n_samples : int
         Samples the local fit used.
+    walls : tuple
+        ``(bottom, top)`` tip levels (deg) at which the record's tip was held by a wall and the
+        fit censored (None: no wall on that side).
     """
 
     model: KnobModel
@@ -435,10 +473,11 @@ class TipFit:
     unidentified: dict[str, str] = field(default_factory=dict)
     sliding: dict[str, str] = field(default_factory=dict)
     n_samples: int = 0
+    walls: tuple = (None, None)
 
 
 def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
-            keep: np.ndarray | None = None) -> TipFit:
+            keep: np.ndarray | None = None, walls: tuple[float | None, float | None] = (None, None)) -> TipFit:
     """Fit the seven tip parameters to a record by output error.
 
     Parameters
@@ -449,6 +488,10 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
         Extra starting models for the local fit (e.g. the current's reading).
     keep : numpy.ndarray of int, optional
         Sample indices that a decimation must keep (the reversals).
+    walls : tuple of float or None
+        ``(bottom, top)``: tip levels beyond which the measured tip is held by a wall
+        (:func:`find_walls`); samples there are censored (the free loop only has to reach the
+        wall), so the loop fitted is the free tip's.
 
     Returns
     -------
@@ -463,46 +506,121 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     search_idx = decimation_index(qf, SEARCH_SAMPLES)
     qs, ys = np.ascontiguousarray(qf[search_idx]), np.ascontiguousarray(yf[search_idx])
 
+    cs, cf = censor_of(ys, walls), censor_of(yf, walls)
+    free_s = None if cs is None else ~(cs[0] | cs[2])
+
     cands = _candidates(q_min, q_max)
     sse = np.empty(cands.shape[0])
-    _batch_kernel(qs, ys, cands, sse)
-    thetas = [_start_from_geometry(g, qs, ys) for g in _distinct_best(cands, sse, N_STARTS, span)]
+    _batch_kernel(qs, ys, np.ones(qs.size) if free_s is None else free_s.astype(float), cands, sse)
+    thetas = [_start_from_geometry(g, qs, ys, free_s) for g in _distinct_best(cands, sse, N_STARTS, span)]
     for m in starts:
         zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
         thetas.append(theta_from_model(m, zi))
 
     # noise scale for the robust loss: the best start's residual spread
-    r0 = min((_residuals(th, qs, ys) for th in thetas), key=lambda r: float(r @ r))
+    r0 = min((_residuals(th, qs, ys, cs) for th in thetas), key=lambda r: float(r @ r))
     f_scale = max(3.0 * _robust_sd(r0), 1e-6 * max(1.0, float(np.ptp(y))))
     with threadpool_limits(limits=1):  # small dense algebra: threads only fight on 2 cores
         # every start refined on the search's subset, the winner on the fit's samples
         best = None
         for th in thetas:
-            res = _refine(th, qs, ys, f_scale)
+            res = _refine(th, qs, ys, f_scale, cens=cs)
             if best is None or res.cost < best.cost:
                 best = res
         # a second pass with the scale of the winner's own residuals
-        sd = _robust_sd(_residuals(best.x, qf, yf))
+        sd = _robust_sd(_residuals(best.x, qf, yf, cf))
         f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
-        best = _refine(best.x, qf, yf, f_scale)
+        best = _refine(best.x, qf, yf, f_scale, cens=cf)
     th = best.x
     model = model_of(th)
-    resid = _residuals(th, qf, yf)
-    noise = _robust_sd(resid)
-    rmse = float(np.sqrt(np.mean((model.forward(q, float(y[0])) - y) ** 2)))
+    resid = _residuals(th, qf, yf, cf)
+    noise = _robust_sd(resid if cf is None else resid[~(cf[0] | cf[2])])
+    # from the first measured tip angle (DESIGN.md section 3), or, at a wall, where the fit puts
+    # the free tip: a tip held by a wall says nothing of how far beyond it the free loop starts
+    free = model.forward(q, float(y[0])) if cf is None else predict(th, q)
+    rmse = float(np.sqrt(np.mean((at_walls(free, walls, y) - y) ** 2)))
     with threadpool_limits(limits=1):
-        stderr, tau = _stderr(th, qf, yf, resid, noise)
+        stderr, tau = _stderr(th, qf, yf, resid, noise, cf)
     unident, sliding = _unidentified(th, model, qf, stderr, span, noise)
     return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
-                  theta=th, unidentified=unident, sliding=sliding, n_samples=int(qf.size))
+                  theta=th, unidentified=unident, sliding=sliding, n_samples=int(qf.size), walls=tuple(walls))
+
+
+WALL_BAND = 3.0
+"""Samples within this many noise sigmas of a wall's level count as held by it."""
+
+
+def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None, float | None]:
+    """Tip levels ``(bottom, top)`` at which a wall holds the measured tip (None: no wall seen).
+
+    A wall shows as the tip's extreme level held while the knob keeps driving toward it: on a
+    free loop the tip rises with the knob (slope omega >= 0.8 deg/deg) until the reversal, so it
+    stays within the band of ``WALL_BAND`` noise sigmas of its extreme for at most about
+    ``WALL_BAND sigma / omega`` deg of advancing knob; a wall holds it there for the rest of the
+    stroke. Required: on one stroke at least, ``max(1.5, 5 sigma)`` deg of advancing knob at the
+    level, reached from at least ``max(2, 6 sigma)`` deg of tip below it.
+    """
+    q = np.asarray(q, float)
+    y = np.asarray(y, float)
+    if q.size < 20:
+        return None, None
+    # the fit's residual spread is inflated by the very wall it misses: the tracker's own noise
+    # from second differences (a piecewise-linear tip has none), never below a third of it (a
+    # filtered tracker's noise is smooth and hides from differences)
+    d2 = np.diff(y, 2)
+    s2 = 1.4826 * float(np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+    sigma = max(min(float(noise), s2), float(noise) / 3.0, 1e-3)
+    k = 5
+    pad = np.pad(y, (k // 2, k // 2), mode="edge")
+    ym = np.median(np.lib.stride_tricks.sliding_window_view(pad, k), axis=1)   # no lone outlier sets a level
+    dq = np.gradient(q)
+    out: list[float | None] = []
+    for sign in (-1.0, 1.0):
+        level = float(np.max(sign * ym))
+        near = sign * ym >= level - WALL_BAND * sigma
+        advancing = sign * dq > 0
+        run = near & advancing
+        travel = 0.0
+        # contiguous stretches at the level while the knob advances, each reached from below
+        edges = np.flatnonzero(np.diff(np.concatenate([[0], run.astype(np.int8), [0]])))
+        for a, b in zip(edges[::2], edges[1::2]):
+            j = a
+            while j > 0 and advancing[j - 1]:
+                j -= 1
+            if level - float(np.min(sign * ym[j:a + 1])) >= max(2.0, 6.0 * sigma):
+                # per stroke, not summed: a sine's slow approach to each reversal adds up
+                travel = max(travel, float(np.ptp(q[a:b])))
+        out.append(sign * (level - WALL_BAND * sigma) if travel >= max(1.5, 5.0 * sigma) else None)
+    return out[0], out[1]
+
+
+def wall_levels(walls: tuple[float | None, float | None], y: np.ndarray) -> tuple[float | None, float | None]:
+    """Each wall's level (deg of tip): the median of the measured tip ``y`` beyond its censoring
+    threshold ``walls = (bottom, top)``."""
+    bottom, top = walls
+    return (float(np.median(y[y <= bottom])) if bottom is not None and np.any(y <= bottom) else None,
+            float(np.median(y[y >= top])) if top is not None and np.any(y >= top) else None)
+
+
+def at_walls(free: np.ndarray, walls: tuple[float | None, float | None], y: np.ndarray) -> np.ndarray:
+    """The free tip ``free`` as the walls of a record ``y`` hold it (clipped at :func:`wall_levels`)."""
+    bottom, top = wall_levels(walls, y)
+    out = free
+    if top is not None:
+        out = np.minimum(out, top)
+    if bottom is not None:
+        out = np.maximum(out, bottom)
+    return out
 
 
 def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
-            noise: float) -> tuple[dict[str, float], float]:
+            noise: float, cens: Censor | None = None) -> tuple[dict[str, float], float]:
     inl = np.abs(resid - np.median(resid)) <= max(4.0 * noise, 1e-12)
+    if cens is not None:
+        inl &= ~(cens[0] | cens[2])     # a sample at a wall is a bound, not a measurement
     r = resid[inl]
     tau = autocorrelation_time(r)
-    jac = _residual_jacobian(th, q, y)[inl]
+    jac = _residual_jacobian(th, q, y, cens)[inl]
     dof = max(r.size - th.size, 1)
     s2 = float(r @ r) / dof * tau
     # scale the columns, then read the null directions off the eigenvectors: a pseudo-inverse
@@ -619,11 +737,13 @@ def bootstrap_tip(fit: TipFit, q: np.ndarray, y: np.ndarray, chk, n: int,
             w = np.bincount(np.searchsorted(ids, pick), minlength=ids.size)[np.searchsorted(ids, cyc)]
             sw = np.sqrt(w.astype(float))
 
+            cens = censor_of(yf, fit.walls)
+
             def fun(th):
-                return _residuals(th, qf, yf) * sw
+                return _residuals(th, qf, yf, cens) * sw
 
             def jac(th):
-                return _residual_jacobian(th, qf, yf) * sw[:, None]
+                return _residual_jacobian(th, qf, yf, cens) * sw[:, None]
 
             inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
             th0 = np.minimum(np.maximum(fit.theta, _LO + inner), _HI - inner)
