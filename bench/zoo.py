@@ -13,7 +13,8 @@ What counts, per case:
   refusal, or a *wrong* one); *silent failure* when it returns a parameter off by more than that.
   Whether a record can fix a parameter is judged on the *true* loop with the same rules identify
   applies to its fit (a loaded stretch past each edge, samples on each dead-zone flat, the tip
-  leaving each backlash plateau), which is the plant's truth, not our estimate.
+  leaving each backlash plateau, and no exact null direction of the true loop's Jacobian on the
+  record moving it: then no method could fix it), which is the plant's truth, not our estimate.
 * 2-sigma coverage: the share of returned parameters whose truth lies within two standard errors.
 
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
@@ -36,6 +37,7 @@ import numpy as np
 from hystcli import shift
 from hystcli.errors import HystError
 from hystcli.identify import current_levels, identify, tip
+from hystcli.identify.sweep import decimation_index
 from hystcli.io import parse_run
 from hystcli.model import KnobModel, Model
 from hystcli.zoo import plants
@@ -55,8 +57,13 @@ def truth_can_fix(case: plants.SweepCase) -> tuple[set[str], set[str]]:
     y0 = float(case.factors.get("y_start", 0.0))
     th = tip.theta_from_model(m, (y0 - 0.5 * (m.h_pos + m.h_neg)) / m.omega)
     noise = float(case.factors.get("noise_y", 0.1))
-    zero = {name: 0.0 for name in tip.PARAMS}
-    unfixed, sliding = tip._unidentified(th, m, q, zero, float(np.ptp(q)), noise)
+    # the record's information at the true loop: a direction of the true loop's Jacobian that
+    # moves no sample (an exact null) leaves what it moves unfixed for any method; the rest of
+    # the rules need no uncertainty (zero), only where the samples lie
+    idx = decimation_index(q, tip.MAX_SAMPLES)
+    stderr, _ = tip._stderr(th, q[idx], np.zeros(idx.size), np.full(idx.size, noise), noise)
+    null = {name: 0.0 if math.isfinite(v) else math.inf for name, v in stderr.items()}
+    unfixed, sliding = tip._unidentified(th, m, q, null, float(np.ptp(q)), noise)
     return set(unfixed), set(sliding)
 
 

@@ -308,6 +308,14 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                                     f"{getattr(model, name):.2f} deg")
     else:
         model, stderr = _model_from_current(reading, omega, where_k)
+        for side in reading.first_only:
+            # an estimate without an uncertainty: not claimed, and no reference for Algorithm 1
+            stderr.pop(f"d_{side}", None)
+            warnings.append(f"{where_k}: only the record's first stretch shows the "
+                            f"{'positive' if side == 'pos' else 'negative'} tendon taken up, and it starts from a "
+                            f"state the current cannot tell: d_{side} = {getattr(model, f'd_{side}'):.2f} deg is an "
+                            "estimate (it may lie beyond the edge), left without an uncertainty, and Algorithm 1 "
+                            "will not use it; sweep a full cycle past both edges")
         rmse = None
         if yname in run:
             rmse = float(np.sqrt(np.mean((model.forward(q, float(run[yname][0])) - run[yname]) ** 2)))
@@ -316,7 +324,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     ident = None
     if c is not None:
         ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
-                        tuple(fit.sliding) if fit is not None else ())
+                        tuple(fit.sliding) if fit is not None else tuple(f"d_{s}" for s in reading.first_only))
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))

@@ -30,6 +30,15 @@ import numpy as np
 from ..current import FLAT_AFTER, Kink, arrival_edge, edge_piece, loading_edge, pieces, robust_noise
 from .sweep import SweepCheck
 
+END_TRAVEL = 2.0
+"""Knob travel (deg) before a stretch's end over which its end slope is read."""
+
+ELASTIC_TOP = 2.0
+"""An end slope this many times the loaded slope at the edge: the load rose elastically steeper
+at the top of the stroke (a wall, a stiffening cable), so a steep fall after the reversal is that
+load coming back, not the sheath friction flipping over the backlash."""
+
+
 @dataclass(frozen=True)
 class Stretch:
     """The current's reading on one monotone stretch of the knob.
@@ -50,6 +59,12 @@ class Stretch:
         dC/dq (loading-positive) of the pieces either side of the edge.
     plateau : float or None
         Travel from the reversal over which the current holds before it unloads (deg).
+    plateau_held : bool
+        The plateau is a held load (a flat piece), not a steep fall read as the sheath friction
+        flipping.
+    end_slope : float or None
+        dC/dq (loading-positive) over the stretch's last degrees before its end: steeper than
+        the loaded slope at the edge when a wall or a stiffening cable took the load there.
     arrival : Kink or None
         Where the unloading tendon's current arrives at the dead zone (a stretch from a reversal).
     """
@@ -64,6 +79,8 @@ class Stretch:
     loaded_slope: float | None = None
     plateau: float | None = None
     arrival: Kink | None = None
+    plateau_held: bool = False
+    end_slope: float | None = None
 
 
 @dataclass(frozen=True)
@@ -90,6 +107,10 @@ class CurrentReading:
     noise : float
         Sample-to-sample noise of the conditioned current (mA).
     stretches : tuple of Stretch
+    first_only : tuple of str
+        Sides (``"pos"``/``"neg"``) whose edge only the record's first stretch shows: it starts
+        from a state the current cannot tell (with the tip held low on its plateau the tendon
+        takes up the load further out than the edge), so the edge is an estimate, not a reading.
     """
 
     edges: dict = field(default_factory=dict)
@@ -102,6 +123,7 @@ class CurrentReading:
     dead_slope: float = math.nan
     noise: float = math.nan
     stretches: tuple = ()
+    first_only: tuple = ()
 
     @property
     def no_load_level(self) -> float:
@@ -159,48 +181,55 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
-    plateau = None
+    plateau, held = None, False
     if from_reversal and xa.size >= 10:
         # from the reversal on (the slow start included): its own pieces, its own dead zone
         pa = pieces(xa, va, minlen)
         sa = [d * m for (_, _, m, _) in pa]
-        plateau = _plateau(pa, sa, xa, sig, from_reversal, _dead_piece(pa, sa, xa, edge_piece(pa, sa, xa, sig)))
+        plateau, held = _plateau(pa, sa, xa, sig, from_reversal, _dead_piece(pa, sa, xa, edge_piece(pa, sa, xa, sig)))
+    # the slope over the stretch's last END_TRAVEL deg (least squares on the bins): what the
+    # load did just before the next reversal
+    last = xa >= xa[-1] - END_TRAVEL if xa.size else xa.astype(bool)
+    end_slope = float(np.polyfit(xa[last], va[last], 1)[0]) if last.sum() >= 4 else None
     if kink is None:
-        return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival)
+        return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival, plateau_held=held,
+                       end_slope=end_slope)
     return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
-                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival)
+                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival,
+                   plateau_held=held, end_slope=end_slope)
 
 
-def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> float | None:
+def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[float | None, bool]:
     """Travel from a reversal to where the tendon starts unloading (the backlash), when it shows.
 
     The stretch after a loaded reversal runs: the backlash phase (a plateau while the sheath
     friction holds the load, or a steep fall while it flips sign, possibly after an immediate
     drop), the unloading slope, the dead zone's flat (piece ``dead``). The backlash is read when
     a piece before the unloading slope clearly differs from it; a current that unloads at once
-    (the tendon's stretch) shows none.
+    (the tendon's stretch) shows none. Returns the width and whether the load was held (a flat
+    piece) rather than read off a steep fall.
     """
     if not from_reversal or dead is None:
-        return None
+        return None, False
     # the dead zone may span several flat pieces: start from its first
     if dead + 1 < len(slopes):
         ref = slopes[dead + 1]          # the loaded slope after the dead zone
         while dead > 1 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(ref, 1e-12):
             dead -= 1
     if dead < 2:
-        return None
+        return None, False
     # the unloading slope: the longest piece before the dead zone, with its neighbours of about
     # the same slope (the segmentation may split it, or round its ends)
     lengths = [xb[p[1] - 1] - xb[p[0]] for p in pieces]
     ju = max(range(dead), key=lambda k: lengths[k])
     unload = slopes[ju]
     if not unload > 0:
-        return None
+        return None, False
     while ju > 0 and abs(slopes[ju - 1] - unload) < 0.4 * unload:
         ju -= 1
     length = sum(lengths[ju:dead])
     if ju == 0 or not (length >= 1.0 and unload * length > 6 * sig):
-        return None
+        return None, False
     # the backlash phase must show one of the two signatures a backlash leaves, unambiguously:
     # the load held (a flat plateau at least a degree long), or the sheath friction flipping
     # over the plateau's width (a fall at least twice the unloading slope, longer than the
@@ -209,8 +238,8 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> float 
     plateau = any(abs(slopes[k]) <= 0.15 * unload and lengths[k] >= 1.0 for k in before)
     flip = sum(lengths[k] for k in before if slopes[k] >= 2.0 * unload) >= 2.0
     if not (plateau or flip):
-        return None
-    return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]]))
+        return None, False
+    return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]])), plateau
 
 
 def _dead_piece(pieces, slopes, xb, edge_piece: int | None) -> int | None:
@@ -243,12 +272,22 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     for i, (a, b, d) in enumerate(chk.segments):
         stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
     edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
+    first_only: list[str] = []
     for side, d in (("pos", +1), ("neg", -1)):
         # stretches that came through the whole dead zone from a reversal first: the record's
         # first stretch starts wherever the knob rested
         ks = [s.edge for s in stretches if s.direction == d and s.edge is not None and s.from_reversal]
         if not ks:
-            ks = [s.edge for s in stretches if s.direction == d and s.edge is not None]
+            # the first stretch's edge only when no stretch from a reversal went past it and
+            # failed to show it: the first starts from a state the current cannot tell (a tendon
+            # may be taut with the tip held on its plateau), and where a stretch from a known
+            # reversal saw no edge there, the first one's kink is something else
+            first = [s.edge for s in stretches if s.direction == d and s.edge is not None]
+            passed = [s for s in stretches if s.direction == d and s.from_reversal and first
+                      and d * (q[s.stop] - first[0].at) > 1.0]
+            ks = first if not passed else []
+            if ks:
+                first_only.append(side)
         at = np.array([k.at for k in ks])
         off = np.abs(at - np.median(at)) > 1.0 if ks else np.zeros(0, bool)
         # stretches that disagree (more than a third of them over a degree off) show no edge one
@@ -264,14 +303,30 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
         # complete branches (reversal to reversal) first: a stretch cut by the record's end is
         # read on less travel
-        pl = [s.plateau for s in stretches[:-1] if s.direction == -d and s.plateau is not None]
+        # a steep fall after the reversal is the sheath friction flipping only if the load did
+        # not rise as steeply before it: a wall, or a cable stiffening at the top of the stroke,
+        # gives the same fall back elastically, with no backlash in it
+        def shown(i: int, s: Stretch) -> bool:
+            if s.direction != -d or s.plateau is None:
+                return False
+            prev = stretches[i - 1] if i > 0 else None
+            elastic = (prev is not None and prev.end_slope is not None and prev.loaded_slope is not None
+                       and d * prev.end_slope >= ELASTIC_TOP * max(prev.loaded_slope, 1e-12))
+            return s.plateau_held or not elastic
+
+        pl = [s.plateau for i, s in enumerate(stretches[:-1]) if shown(i, s)]
         if not pl:
-            pl = [s.plateau for s in stretches if s.direction == -d and s.plateau is not None]
+            pl = [s.plateau for i, s in enumerate(stretches) if shown(i, s)]
         arr = np.array(pl)
+        # the complete stretches after a loaded reversal (the one before took the tendon up past
+        # its edge): a backlash shows after most of them; a plateau after fewer than half is
+        # something else (a cogging dip, a spike's tail; noise may hide one of two)
+        loaded_after = sum(1 for i, s in enumerate(stretches[:-1])
+                           if i > 0 and s.direction == -d and stretches[i - 1].edge is not None)
         # every stretch within 0.5 deg (or 10 %) of their median: a backlash the current shows
         # the same way after every reversal
         tol = max(0.5, 0.10 * abs(float(np.median(arr)))) if arr.size else 0.5
-        if arr.size and np.all(np.abs(arr - np.median(arr)) <= tol):
+        if arr.size and np.all(np.abs(arr - np.median(arr)) <= tol) and 2 * len(pl) >= loaded_after:
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
             backlash_se["pos" if d > 0 else "neg"] = max(
                 float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size)) if arr.size > 1 else 0.0,
@@ -287,4 +342,4 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     return CurrentReading(edges=edges, edges_se=edges_se, backlash=backlash, backlash_se=backlash_se,
                           arrivals=arrivals, no_load=levels, loaded_slope=float(np.median(loaded)) if loaded else math.nan,
                           dead_slope=float(np.median(dead)) if dead else math.nan, noise=noise,
-                          stretches=tuple(stretches))
+                          stretches=tuple(stretches), first_only=tuple(s for s in first_only if s in edges))
