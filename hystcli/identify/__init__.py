@@ -32,7 +32,7 @@ from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
 from .current import CurrentReading, read_current
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
-from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, wall_levels, z_path
+from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
 from .tip import predict as tip_predict
 
 __all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "current_levels", "find_reversals",
@@ -51,6 +51,10 @@ holds the tip (:func:`hystcli.identify.tip.find_walls`). Measured on the indepen
 with a wall (design seeds 0-599 of ``hystcli.zoo.plants``): 0.11-3.2 deg of plain-fit misfit,
 0.00-0.07 once the samples at the wall are censored; free loops fit to a few hundredths, the
 twin's sample sweeps (creep, lag) to 0.5, where no wall is found."""
+
+AMBIGUOUS_RMS = 1.25
+"""A refit with an edge where the motor current puts it, within this factor of the tip fit's RMS
+residual: the record holds both loops, and the edge is not claimed."""
 
 SLIDES_WITH = {"d_pos": ("d_pos", "h_pos", "b_pos", "b_neg"), "d_neg": ("d_neg", "h_neg", "b_pos", "b_neg")}
 """Parameters that move with an edge the record cannot place (its flat too narrow to see)."""
@@ -243,6 +247,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         c = condition(np.asarray(run[cname], float), fs, filter_hz)
     reading = read_current(q, c, t, chk) if c is not None else None
     warnings: list[str] = []
+    ambiguous_edges: list[str] = []
     where_k = f"{where}knob {k}"
     if tip:
         y = np.asarray(run[yname], float)
@@ -303,9 +308,22 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
             for side, name in (("pos", "d_pos"), ("neg", "d_neg")):
                 e = reading.edges.get(side)
                 if e is not None and name in stderr and abs(e - getattr(model, name)) > max(1.0, 3 * stderr[name]):
+                    # the current reads the edge directly; if a loop with the edge where the current
+                    # puts it fits the tip about as well, the record cannot tell the two apart
+                    alt, rms_alt, rms_fit = refit_with_edge(fit, q, y, name, e)
+                    ambiguous = (abs(getattr(alt, name) - e) < abs(getattr(alt, name) - getattr(model, name))
+                                 and rms_alt <= AMBIGUOUS_RMS * rms_fit)
                     warnings.append(f"{where_k}: the current shows the {'positive' if side == 'pos' else 'negative'} "
                                     f"tendon taken up at {e:.2f} deg, the tip's {name} is "
-                                    f"{getattr(model, name):.2f} deg")
+                                    f"{getattr(model, name):.2f} deg" + (
+                                        f"; a loop with the edge at {getattr(alt, name):.2f} deg fits the tip as well "
+                                        f"(RMS {rms_alt:.3f} against {rms_fit:.3f} deg): the record cannot tell them "
+                                        f"apart, so {', '.join(SLIDES_WITH[name])} are left without an uncertainty "
+                                        "and Algorithm 1 will not use this edge" if ambiguous else ""))
+                    if ambiguous:
+                        for tied in SLIDES_WITH[name]:
+                            stderr.pop(tied, None)
+                        ambiguous_edges.append(name)
     else:
         model, stderr = _model_from_current(reading, omega, where_k)
         for side in reading.first_only:
@@ -324,7 +342,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     ident = None
     if c is not None:
         ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
-                        tuple(fit.sliding) if fit is not None else tuple(f"d_{s}" for s in reading.first_only))
+                        tuple(fit.sliding) + tuple(ambiguous_edges) if fit is not None
+                        else tuple(f"d_{s}" for s in reading.first_only))
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))

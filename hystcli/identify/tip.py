@@ -613,6 +613,42 @@ def at_walls(free: np.ndarray, walls: tuple[float | None, float | None], y: np.n
     return out
 
 
+def refit_with_edge(fit: TipFit, q: np.ndarray, y: np.ndarray, name: str, at: float) -> tuple[KnobModel, float, float]:
+    """The local fit restarted with edge ``name`` (``d_pos``/``d_neg``) moved to ``at``.
+
+    Returns the refined model and the RMS residual of it and of ``fit`` over the same samples:
+    when another reading (the motor current) puts an edge elsewhere, whether the record holds a
+    loop with the edge there that fits about as well (the record then cannot tell the two).
+    """
+    q = np.ascontiguousarray(q, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    idx = decimation_index(q, MAX_SAMPLES)
+    qf, yf = q[idx], y[idx]
+    cf = censor_of(yf, fit.walls)
+    th = np.array(fit.theta, dtype=float)
+    d_neg, d_pos = th[0], th[0] + th[1]
+    if name == "d_pos":
+        d_pos = at
+    else:
+        d_neg = at
+    th[0], th[1] = min(d_neg, d_pos), abs(d_pos - d_neg)
+    f_scale = max(3.0 * fit.noise, 1e-6 * max(1.0, float(np.ptp(y))))
+    # the edge held where the other reading puts it (d_neg is theta[0]; d_pos = theta[0] +
+    # theta[1], held with the other edge where the fit has it), every other unknown refitted
+    lo, hi = _LO.copy(), _HI.copy()
+    pin = (0,) if name == "d_neg" else (0, 1)
+    for i in pin:
+        lo[i], hi[i] = th[i] - 1e-9 * max(1.0, abs(th[i])), th[i] + 1e-9 * max(1.0, abs(th[i]))
+    th = np.minimum(np.maximum(th, lo), hi)
+    span = float(np.ptp(q)) or 1.0
+    x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1, max(1.0, f_scale), 0.05 * span])
+    with threadpool_limits(limits=1):
+        res = least_squares(_residuals, th, jac=_residual_jacobian, bounds=(lo, hi), args=(qf, yf, cf),
+                            loss="soft_l1", f_scale=f_scale, x_scale=x_scale, max_nfev=400)
+    rms = lambda t: float(np.sqrt(np.mean(_residuals(t, qf, yf, cf) ** 2)))  # noqa: E731
+    return model_of(res.x), rms(res.x), rms(fit.theta)
+
+
 def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
             noise: float, cens: Censor | None = None) -> tuple[dict[str, float], float]:
     inl = np.abs(resid - np.median(resid)) <= max(4.0 * noise, 1e-12)
