@@ -30,6 +30,10 @@ import numpy as np
 from ..current import FLAT_AFTER, Kink, arrival_edge, edge_piece, loading_edge, pieces, robust_noise
 from .sweep import SweepCheck
 
+UNLOAD_LEVEL = 5.0
+"""A loading edge read this many current-noise sigmas on the far side of the no-load level (the
+other tendon's load) is a held load starting to unload, not an edge."""
+
 END_TRAVEL = 2.0
 """Knob travel (deg) before a stretch's end over which its end slope is read."""
 
@@ -273,10 +277,19 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
     edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
     first_only: list[str] = []
+    # the no-load current, roughly: the median level at which the stretches from a reversal saw
+    # a tendon taken up, both ways (a kink read where a held load starts to unload sits far
+    # from it, on the loaded side)
+    lv = [s.edge.level for s in stretches if s.edge is not None and s.from_reversal]
+    c0 = float(np.median(lv)) if lv else math.nan
     for side, d in (("pos", +1), ("neg", -1)):
         # stretches that came through the whole dead zone from a reversal first: the record's
         # first stretch starts wherever the knob rested
         ks = [s.edge for s in stretches if s.direction == d and s.edge is not None and s.from_reversal]
+        # a tendon is taken up from the no-load level, never from a load the other tendon still
+        # holds (the current then starts below it, in loading-positive terms): that kink is the
+        # hold ending, the other tendon unloading
+        ks = [k for k in ks if not d * (k.level - c0) < -UNLOAD_LEVEL * noise]
         if not ks:
             # the first stretch's edge only when no stretch from a reversal went past it and
             # failed to show it: the first starts from a state the current cannot tell (a tendon
