@@ -116,8 +116,13 @@ class Kink:
 
 def kink_fit(q: np.ndarray, c: np.ndarray, direction: int, *, lo: float | None = None,
              hi: float | None = None, curved: bool = True, min_side: int = 3,
-             resolution: float | None = None) -> Kink | None:
+             resolution: float | None = None, convex: bool = False) -> Kink | None:
     """Best continuous two-line fit (with a quadratic term after the kink when ``curved``).
+
+    With ``convex``, a quadratic term that bends a loaded side of ten points or more down by more
+    than twice its standard error is dropped (the fit made again straight): a taut tendon
+    stiffens, never softens, and a current that sags (a replay slowing into its own turn, its
+    friction fading) would otherwise pull the kink late.
 
     ``c = a + s0 (x - e) + s1 (x - e)+ [+ k (x - e)+^2]`` with ``x = direction * q``; the kink
     ``e`` is searched on a grid within ``[lo, hi]`` (knob angles; default the data's range less
@@ -188,7 +193,12 @@ def kink_fit(q: np.ndarray, c: np.ndarray, direction: int, *, lo: float | None =
         cov = np.linalg.inv(a1.T @ a1) * s2
         se_s1 = math.sqrt(max(cov[2, 2], 0.0))
     except np.linalg.LinAlgError:
-        se_s1 = math.inf
+        cov, se_s1 = None, math.inf
+    # a sag clear of the noise (two standard errors) on a loaded stretch long enough to show one
+    # (ten points): no tendon's; on fewer the quadratic term is loose either way, and is kept
+    if (convex and curved and cov is not None and int(np.sum(dx1 >= 0)) >= 10
+            and b1[3] + 2.0 * math.sqrt(max(cov[3, 3], 0.0)) < 0):
+        return kink_fit(q, c, direction, lo=lo, hi=hi, curved=False, min_side=min_side, resolution=resolution)
     # standard error of the kink from the SSE profile: where it rises by s2 above its minimum
     prof = sse - float(np.min(sse))
     inside = grid[prof <= s2]
@@ -212,9 +222,10 @@ def _columns(dx: np.ndarray, curved: bool) -> list[np.ndarray]:
 # straight pieces and the loading edge
 # --------------------------------------------------------------------------------------------
 @njit(cache=True)
-def _segment_dp(x, v, nseg, minlen):
-    # Optimal split of (x, v) into nseg independent straight lines (least squares), by dynamic
-    # programming over prefix sums: exact, and cheap for the ~100-200 bins of one branch.
+def _segment_tables(x, v, nseg, minlen):
+    # Optimal splits of (x, v) into 1..nseg independent straight lines (least squares), by
+    # dynamic programming over prefix sums: exact, and cheap for the ~100-200 bins of one branch.
+    # best[k, j]: least SSE of the first j points in k lines; arg[k, j]: where the last one starts.
     n = x.shape[0]
     s0 = np.zeros(n + 1)
     sx = np.zeros(n + 1)
@@ -251,6 +262,11 @@ def _segment_dp(x, v, nseg, minlen):
                 if total < best[k, j]:
                     best[k, j] = total
                     arg[k, j] = i
+    return best, arg
+
+
+@njit(cache=True)
+def _backtrack(arg, nseg, n):
     bounds = np.zeros(nseg + 1, dtype=np.int64)
     bounds[nseg] = n
     j = n
@@ -260,12 +276,34 @@ def _segment_dp(x, v, nseg, minlen):
     return bounds
 
 
+@njit(cache=True)
+def _segment_dp(x, v, nseg, minlen):
+    # the optimal split into exactly nseg lines
+    best, arg = _segment_tables(x, v, nseg, minlen)
+    return _backtrack(arg, nseg, x.shape[0])
 
-def pieces(x: np.ndarray, v: np.ndarray, minlen: int) -> list[tuple[int, int, float, float]]:
-    """Split binned points into straight pieces: ``(first, stop, slope, level at first)``."""
+
+
+def pieces(x: np.ndarray, v: np.ndarray, minlen: int,
+           sig: float | None = None) -> list[tuple[int, int, float, float]]:
+    """Split binned points into straight pieces: ``(first, stop, slope, level at first)``.
+
+    Into :data:`N_PIECES` pieces (fewer when there are too few points); with ``sig`` (the noise
+    of one point), into as many as pay for themselves by the Bayesian information criterion:
+    each piece costs its three parameters (level, slope, where it starts) ``log(n)`` noise
+    variances of residual, so the noise of a few readings is not cut into steep little pieces
+    (a kink clear enough to take, seven standard errors, earns far more than that).
+    """
     n = x.size
-    k = max(1, min(N_PIECES, n // max(minlen, 1)))
-    bounds = _segment_dp(np.ascontiguousarray(x), np.ascontiguousarray(v), k, minlen)
+    kmax = max(1, min(N_PIECES, n // max(minlen, 1)))
+    xs, vs = np.ascontiguousarray(x), np.ascontiguousarray(v)
+    if sig is not None and sig > 0 and kmax > 1:
+        best, arg = _segment_tables(xs, vs, kmax, minlen)
+        crit = best[1:, n] / sig ** 2 + 3.0 * math.log(n) * np.arange(1, kmax + 1)
+        k = 1 + int(np.argmin(crit))
+        bounds = _backtrack(arg, k, n)
+    else:
+        bounds = _segment_dp(xs, vs, kmax, minlen)
     out = []
     for a, b in zip(bounds[:-1], bounds[1:]):
         xs, vs = x[a:b], v[a:b]
@@ -313,7 +351,8 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
 
 
 def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
-                 resolution: float | None = None) -> Kink | None:
+                 resolution: float | None = None, strict_flat: bool = False,
+                 select: bool = False, convex: bool = False) -> Kink | None:
     """Where a tendon is taken up on one monotone stretch, or None when it shows no such kink.
 
     ``q, c`` are points along the motion (binned samples, or a stepping search's readings);
@@ -321,6 +360,14 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     is the jump in slope (dC/dq, loading-positive) out of the flattest piece after which nothing
     flat follows (:func:`edge_piece`), placed by :func:`kink_fit` on the flat piece and the
     loaded run up to a wall. Kinks clearer than :data:`MIN_CLARITY` standard errors only.
+
+    With ``strict_flat`` (a stepping search's readings), the kink fit takes in a piece before the
+    flat one only when its slope is the flat one's within three standard errors of the two:
+    pieces that noise split off the dead zone, never a tendon's unloading that led into it, whose
+    slope may be any share of the loaded one (or twice a pretensioned dead zone's). With
+    ``select``, the stretch is split into only as many pieces as the noise ``sig`` lets pay for
+    themselves (:func:`pieces`). With ``convex``, the loaded side may stiffen but not sag
+    (:func:`kink_fit`).
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -328,7 +375,7 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     x = d * (q - q[0])
     if x.size < 2 * minlen + 1:
         return None
-    pcs = pieces(x, c, minlen)
+    pcs = pieces(x, c, minlen, sig if select else None)
     slopes = [d * m for (_, _, m, _) in pcs]
     j = edge_piece(pcs, slopes, x, sig)
     if j is None:
@@ -336,8 +383,19 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     # the kink fit sees the whole flat stretch before the jump (noise may have split it into
     # pieces) and the loaded run up to a wall (the next qualifying jump)
     first = j
-    while first > 0 and abs(slopes[first - 1]) <= max(FLAT_AFTER * slopes[j + 1], 2.0 * abs(slopes[j])):
-        first -= 1
+    if strict_flat:
+        sxx_j = _sxx(x[pcs[j][0]:pcs[j][1]])
+        while first > 0:
+            k = first - 1
+            sxx_k = _sxx(x[pcs[k][0]:pcs[k][1]])
+            agree = (sxx_k > 0 and sxx_j > 0
+                     and abs(slopes[k] - slopes[j]) <= 3.0 * sig * math.sqrt(1.0 / sxx_k + 1.0 / sxx_j))
+            if not agree:
+                break
+            first = k
+    else:
+        while first > 0 and abs(slopes[first - 1]) <= max(FLAT_AFTER * slopes[j + 1], 2.0 * abs(slopes[j])):
+            first -= 1
     a0 = pcs[first][0]
     stop = x.size
     for jj in range(j + 2, len(pcs)):
@@ -352,10 +410,15 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     # a stiffening loaded side needs its quadratic term, and enough points to carry it
     curved = stop - pcs[j + 1][0] >= 10
     kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
-                    curved=curved, min_side=max(2, minlen // 2), resolution=resolution)
+                    curved=curved, min_side=max(2, minlen // 2), resolution=resolution, convex=convex)
     if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
         return None
     return kink
+
+
+def _sxx(x: np.ndarray) -> float:
+    """Sum of squared deviations of ``x`` from its mean (what a fitted slope's variance divides)."""
+    return float(np.sum((x - x.mean()) ** 2)) if x.size else 0.0
 
 
 def arrival_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
