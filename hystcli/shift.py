@@ -33,11 +33,30 @@ real current is not one law:
   slope out of a flat (or pretensioned, gently sloped) stretch after which nothing flat follows
   (:func:`hystcli.current.loading_edge`, the reading identification uses too), placed by a
   two-line fit, so neither a window's delay nor a filter's rounding moves it.
+  On a stepping search's few noisy readings a second, stricter reading stands in reserve
+  (:func:`~hystcli.current.loading_edge` with ``strict_flat`` and ``select``: as many straight
+  pieces as the readings' noise pays for, the flat stretch without the unloading that led into
+  it); its edge is taken once the loaded stretch past it is long, or when the search can go no
+  further.
 * **whether to believe it.** Every offset carries its evidence (:class:`Evidence`): how clear
   the kink is (jump in slope over its standard error), the fit's residual against the readings'
   own noise, the current level at the kink against the no-load level, the slopes either side.
-  When it is weak, the search refuses with the reason (:class:`ShiftDetectionError`, exit 1)
-  rather than return an offset: a wrong offset makes compensation worse than none.
+  The flat stretch before the kink needs as many readings as the loaded one after it
+  (:data:`AFTER_STEPS`, over 1.5 deg): a kink a step from where the readings begin has no dead
+  zone behind it. The offset must be placed to
+  :data:`MAX_OFFSET_SE`: the kink's standard error (a loosely placed kink waits for more of the
+  loaded stretch), the model's edge's (from the identification), and, on the stretch from where
+  the search began, how far back the edge would lie were the flat the taken-up tendon's backlash
+  plateau (its level above the no-load band, in degrees of the loaded slope). A flat below the
+  band (a no-load level lying off the sweep's: speed, backlash on the sweep's dead zone) counts
+  once the current has gone as far past the no-load level as the flat sat short of it, which an
+  unloading tendon never does. When the evidence is weak, the search refuses with the reason
+  (:class:`ShiftDetectionError`, exit 1) rather than return an offset: a wrong offset makes
+  compensation worse than none.
+* **where to look.** A search that began slack and meets a taut tendon with no edge to take on
+  the way (an edge a step or two from the start, or one too faint or too unsure to take) crosses
+  the dead zone to the other edge, as from a taut start; so does one whose edge the model cannot
+  give an offset from (unplaced, or too uncertain).
 * it never exceeds its step and travel limits and, on any failure or interruption, stops the
   probe and returns the knob to where it began.
 """
@@ -66,11 +85,23 @@ MAX_RESIDUAL = 4.0
 AFTER_STEPS = 4
 """Readings past a kink (and at least 1.5 deg of travel) before it is judged."""
 
+MAX_OFFSET_SE = 0.25
+"""Largest standard error (deg) of an offset taken (two of them: the half degree an offset must
+be good to): the kink's, that of the model's edge it is measured from (the identification's), and
+how far back a possible backlash plateau would put the edge, combined. A search whose kink is less
+sure waits for more of the loaded stretch; one whose model edge or plateau is, refuses that edge."""
+
 ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
 
+RESERVE_STEPS = 12
+"""Readings past an edge that only the stricter reading of the search's readings finds (see
+:func:`hystcli.current.loading_edge`'s ``strict_flat`` and ``select``) before it is taken, unless
+the search can go no further first; the reading identification makes finds most edges sooner."""
+
 LOAD = "load"
+ACCEPT, READY, WAIT, DOUBT, REFUSE = "accept", "ready", "wait", "doubt", "refuse"
 
 
 # --------------------------------------------------------------------------------------------
@@ -294,6 +325,9 @@ class Thresholds:
         Noise of the current (mA).
     unfixed : tuple of str
         Edges the identification could not place (``d_pos``/``d_neg``): no offset from them.
+    half_width : float
+        Half the straight model's dead-zone width (deg): how far from the dead zone's middle its
+        edges lie, which a shift does not change.
     """
 
     eps_lower: float
@@ -304,13 +338,25 @@ class Thresholds:
     dead_zone_swing: float = 0.0
     noise: float = 0.0
     unfixed: tuple[str, ...] = ()
+    half_width: float = 0.0
 
     @property
     def slope_loaded(self) -> float:
         """The loaded slope the thresholds were made from (eps_upper is five times it)."""
         return self.eps_upper / 5.0
 
-    def no_load(self, direction: int, moving: bool) -> tuple[float | None, float]:
+    def spread(self, moving: bool) -> float:
+        """How far (mA) the no-load level may lie from :meth:`no_load`'s for the motor's own
+        friction: none moving (that direction's level is known); at rest, half the gap between
+        the two directions' levels (static friction sits anywhere in it); without the two levels
+        (thresholds given by hand), half of ``eps_upper`` for the unknown Coulomb friction (a
+        sizeable share of the loaded slope, 2.5 deg of it, as the paper's thresholds do)."""
+        if self.no_load_rising is not None and self.no_load_falling is not None:
+            return 0.0 if moving else 0.5 * abs(self.no_load_rising - self.no_load_falling)
+        return 0.5 * self.eps_upper
+
+    def no_load(self, direction: int, moving: bool, *, swing: float | None = None,
+                slope: float | None = None, noise: float | None = None) -> tuple[float | None, float]:
         """The no-load level and the half-width of the band around it that counts as slack (mA).
 
         Read while moving in ``direction`` (a replay): that direction's no-load level. At rest (a
@@ -319,19 +365,31 @@ class Thresholds:
         swing of a pretensioned current across the dead zone, one degree of the loaded slope and
         four noise levels. Without the two levels (thresholds given by hand), half of
         ``eps_upper`` stands for the unknown Coulomb friction.
+
+        Parameters
+        ----------
+        direction : int
+            Direction of motion (+1 or -1).
+        moving : bool
+            Whether the readings are taken moving (a replay) or at rest.
+        swing, slope, noise : float, optional
+            What the search itself measured, in place of the identification's figures: the
+            current's swing across the dead zone (mA), the loaded slope (mA/deg) and the noise of
+            one reading (mA). The identification's are read on a whole sweep and are upper bounds
+            there (a dead-zone slope with the sweep's noise and unloading in it, a loaded slope
+            with a wall in it, the noise of one raw sample where a reading is a median of many).
         """
         level = self.current_dead_zone
-        # without the two levels the motor's Coulomb friction is unknown: allow for it as a
-        # sizeable share of the loaded slope (2.5 deg of it), as the paper's thresholds do
-        spread = 0.5 * self.eps_upper
         if self.no_load_rising is not None and self.no_load_falling is not None:
-            spread = 0.0
             if moving:
                 level = self.no_load_rising if direction > 0 else self.no_load_falling
             else:
                 level = 0.5 * (self.no_load_rising + self.no_load_falling)
-                spread = 0.5 * abs(self.no_load_rising - self.no_load_falling)
-        return level, spread + self.dead_zone_swing + max(self.slope_loaded, 4.0 * self.noise)
+        spread = self.spread(moving)
+        swing = self.dead_zone_swing if swing is None else swing
+        slope = self.slope_loaded if slope is None else slope
+        noise = self.noise if noise is None else noise
+        return level, spread + swing + max(slope, 4.0 * noise)
 
 
 def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
@@ -366,9 +424,9 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
                                   f"(got eps_lower = {eps_lower:g}, eps_upper = {eps_upper:g})")
     if current_dead_zone is not None and not math.isfinite(current_dead_zone):
         raise ShiftDetectionError(f"current_dead_zone must be finite, got {current_dead_zone}")
-    extra: dict = {}
+    km = model.knob(int(knob))
+    extra: dict = {"half_width": 0.5 * max(km.d_pos - km.d_neg, 0.0)}
     if ident is not None:
-        km = model.knob(int(knob))
         if not given_level:
             extra.update(no_load_rising=ident.no_load_rising, no_load_falling=ident.no_load_falling)
         extra.update(dead_zone_swing=abs(ident.slope_dead_zone) * 0.5 * max(km.d_pos - km.d_neg, 0.0),
@@ -448,7 +506,8 @@ class ShiftResult:
     contacts : tuple of float
         Knob angles where a contact made the search reverse.
     start_outside : bool
-        The search began with a tendon already taut (and turned through the dead zone).
+        The search crossed the dead zone from a taut tendon: one taut where it began, or one it
+        met with no edge to read before it (an edge a step or two from the start).
     returned : bool
         The knob was returned to ``start`` after the search.
     eps_lower, eps_upper, step : float
@@ -544,9 +603,12 @@ class _Search:
         self.seg_from_start = True
         self.contacts: list[float] = []
         self.start_outside = False
+        self.turned = False          # began slack, met a taut tendon with no edge, turned round
         self.pending_refusal: str | None = None
+        self.ready = None            # an edge that passed every check on a short loaded stretch
         self.arrival = None          # where an unloading tendon's current met the dead zone
         self.plateaus = {1: 0.0, -1: 0.0}
+        self.model_se = {1: 0.0, -1: 0.0}   # standard errors of the model's d_pos, d_neg
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
 
@@ -582,6 +644,7 @@ class _Search:
     def _reverse(self) -> None:
         # a new segment: the motor's Coulomb friction jumps at a reversal, and no fit may span it
         self.dir = -self.dir
+        self.ready = None
         self.seg_q, self.seg_c = [], []
         self.seg_from_start = False
 
@@ -605,38 +668,151 @@ class _Search:
             self._reverse()
 
     # -- deciding -----------------------------------------------------------------------------
-    def _judge(self, kink) -> tuple[bool, str]:  # noqa: ANN001 - hystcli.current.Kink
-        """Whether a loading kink is an edge to take an offset from, or why not."""
+    def _judge(self, kink) -> tuple[str, str]:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether a loading kink is an edge to take an offset from, or why not.
+
+        Returns
+        -------
+        (status, why) : tuple of str
+            ``"accept"``: take it. ``"ready"``: it passes every check, but on few readings past it
+            (taken only when the search can go no further). ``"wait"``: not judged yet.
+            ``"doubt"``: not taken, its jump in slope is unclear, which more readings may mend.
+            ``"refuse"``: no edge; ``why`` says why.
+        """
         n_after = kink.n_after
         span_after = self.dir * (self.seg_q[-1] - kink.at)
         if n_after < AFTER_STEPS or span_after < max(1.5, 3 * self.u):
-            return False, ""
+            return WAIT, ""
         noise = _reading_noise(np.array(self.seg_c))
         if kink.clarity < MIN_CLARITY:
-            return False, (f"the kink at {kink.at:.2f} deg is unclear: its jump in slope is "
+            return DOUBT, (f"the kink at {kink.at:.2f} deg is unclear: its jump in slope is "
                            f"{kink.clarity:.1f} standard errors (needs {MIN_CLARITY:g})")
         if math.isfinite(noise) and noise > 0 and kink.residual > MAX_RESIDUAL * noise:
-            return False, (f"the current around {kink.at:.2f} deg is not two straight lines (fit residual "
-                           f"{kink.residual:.3g} mA, {kink.residual / noise:.1f} times the readings' noise)")
+            return REFUSE, (f"the current around {kink.at:.2f} deg is not two straight lines (fit residual "
+                            f"{kink.residual:.3g} mA, {kink.residual / noise:.1f} times the readings' noise)")
         if kink.after < 0.5 * self.th.eps_lower:
-            return False, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
-                           f"below a taut tendon's ({self.th.eps_lower:.3g})")
+            return REFUSE, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
+                            f"below a taut tendon's ({self.th.eps_lower:.3g})")
         from .current import JUMP_RATIO
 
         if abs(kink.before) > JUMP_RATIO * kink.after:
-            return False, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
-                           f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
-        # a tendon taken up pulls the current out of the no-load band on its own side; a tendon
-        # unloading toward the band only arrives at it: wait until the current has left it
-        if self.th.current_dead_zone is not None and self._taut_side(self.seg_c[-1]) != self.dir:
-            return False, ""
-        side = self._taut_side(kink.level)
-        if side != 0:
-            # the flat before the kink sits on a loaded level: a plateau of a taut tendon, not
-            # the dead zone; a real edge, if any, comes later
-            return False, (f"the kink at {kink.at:.2f} deg starts from {kink.level:.1f} mA, off the no-load "
-                           f"level {self.th.current_dead_zone:.1f} mA: a taut tendon's plateau, not the dead zone")
-        return True, ""
+            return REFUSE, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
+                            f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
+        # the flat stretch needs as many readings as the loaded one: a kink a step or two from
+        # where the readings begin (an edge at the start) or out of one trough of a cogging
+        # ripple has no dead zone behind it to tell it from the current's own waviness
+        before = [v for v in self.seg_q if self.dir * (v - kink.at) < 0]
+        span_before = self.dir * (kink.at - before[-kink.n_before]) if 0 < kink.n_before <= len(before) else 0.0
+        if kink.n_before < AFTER_STEPS or span_before < max(1.5, 3 * self.u):
+            return REFUSE, (f"the kink at {kink.at:.2f} deg has too short a flat stretch before it "
+                            f"({kink.n_before} readings over {span_before:.1f} deg)")
+        # a dead zone climbs at most its pretension's swing across its whole width: a flat
+        # stretch that climbs further began as a tendon unloading toward the dead zone, and a
+        # fit that spans both places the kink late (the reading in reserve leaves the unloading
+        # out)
+        if self.margin is None and self.th.dead_zone_swing > 0:
+            climb = kink.before * span_before
+            allowed = 2.0 * self.th.dead_zone_swing + self.th.no_load(self.dir, self.moving, swing=0.0)[1]
+            if climb > allowed:
+                return REFUSE, (f"the current before the kink at {kink.at:.2f} deg climbs {climb:.3g} mA over "
+                                f"{span_before:.1f} deg, more than a dead zone does ({allowed:.3g}): a tendon "
+                                "unloading toward it")
+        # how sure the offset would be: the kink's place and the model's edge it is measured from
+        model_se = self.model_se.get(self.dir, 0.0)
+        edge = "d_pos" if self.dir > 0 else "d_neg"
+        if edge in self.th.unfixed:
+            # the search goes on: the other edge, across the dead zone, may give the offset
+            return REFUSE, (f"a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
+                            f"place {edge} (its dead-zone flat was too narrow to see on the sweep), so that edge "
+                            "gives no offset; identify on a slower sweep")
+        if model_se > MAX_OFFSET_SE:
+            return REFUSE, (f"the model's {edge} is itself known only to +-{model_se:.2f} deg (its "
+                            "identification's standard error): no offset from it is surer than that")
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        if c0 is None:
+            return self._placed(kink, model_se, 0.0) or (ACCEPT, "")
+        swing, band_wide, band_own = self._level_bands(kink, noise)
+        # the flat's level at the kink and the last reading's, loading-positive, from the no-load
+        # level of the sweep
+        lvl = self.dir * (kink.level - c0)
+        last = self.dir * (self.seg_c[-1] - c0)
+        # A flat on the side of the tendon taken up, above where a (pretensioned) dead zone
+        # climbs to at its edge, may be that tendon's backlash plateau (taut since before the
+        # search, its tip held): its kink then marks where the earlier stretch ended, as far past
+        # the edge as the flat's excess level is in degrees of the loaded slope, which counts in
+        # how surely the kink places the edge. Only on the stretch from where the search began: a
+        # tendon met after crossing the dead zone (from a taut start, after a turn or a contact)
+        # lay slack all the way (the other one unloads fully before it is taken up), and an
+        # excess level there is the sweep's no-load level lying off.
+        plateau = 0.0
+        excess = lvl - swing - (0.0 if self.margin is not None else self.th.spread(self.moving))
+        if excess > 0 and self.seg_from_start and not self.start_outside and kink.after > 0:
+            rn = noise if math.isfinite(noise) else self.th.noise
+            plateau = max(excess - 4.0 * rn, 0.0) / kink.after
+        placed = self._placed(kink, model_se, plateau)
+        if placed is not None:
+            return placed
+        # A tendon taken up pulls the current out of the no-load band on its own side; a tendon
+        # unloading toward the band only arrives at it and flattens there: wait until the current
+        # has left it. A flat that sat below the band (a replay's no-load level moves with its
+        # speed, the sweep's with the backlash on its dead-zone stretch) must be followed by a
+        # current as far beyond it as the flat sat short of the no-load level: an unloading
+        # tendon would need the no-load level to lie further out still, and to be unloading yet.
+        if last <= band_own + (-lvl if -lvl > band_own else 0.0):
+            return WAIT, ""
+        # the identification's band is read on a whole sweep and is wide where that sweep was
+        # noisy, walled or unloading on its dead-zone stretch; the kink's own band is enough when
+        # the search can go no further
+        if last > band_wide + (-lvl if -lvl > band_wide else 0.0):
+            return ACCEPT, ""
+        return READY, ""
+
+    def _placed(self, kink, model_se: float, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
+        """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (the
+        model's edge or a possible plateau is too unsure: more readings would not help) or a
+        wait with the reason (a longer loaded stretch places the kink better)."""
+        if plateau > MAX_OFFSET_SE:
+            return REFUSE, (f"the kink at {kink.at:.2f} deg starts from {kink.level:.1f} mA, off the no-load level "
+                            "toward the tendon taken up: it may be that tendon's backlash plateau (taut since before "
+                            f"the search), which would put the edge up to {plateau:.2f} deg back")
+        if math.hypot(kink.se, model_se, plateau) > MAX_OFFSET_SE:
+            need = math.sqrt(max(MAX_OFFSET_SE ** 2 - model_se ** 2 - plateau ** 2, 0.0))
+            why = f"the kink at {kink.at:.2f} deg is placed only to +-{kink.se:.2f} deg (needs {need:.2f})"
+            # the fit's loaded stretch ends before the last reading when a steeper one follows (a
+            # wall, a stiffening cable): more readings would not place the kink any better
+            past = sum(1 for v in self.seg_q if self.dir * (v - kink.at) >= 0)
+            return (WAIT if past <= kink.n_after else REFUSE), why
+        return None
+
+    def _level_bands(self, kink, noise: float) -> tuple[float, float, float]:  # noqa: ANN001
+        """(swing, wide, own) in mA: how far a dead zone's current climbs toward an edge from the
+        no-load level, and the half-widths of the band around that level that count as slack.
+
+        The swing is the slope of the kink's own flat stretch over half the dead zone's width
+        (never more than the identification's: a steep stretch is no dead zone). ``wide`` is the
+        identification's band (:meth:`Thresholds.no_load`: its swing, loaded slope and noise);
+        ``own`` the kink's (its swing, a degree of the slope after it, four times the readings'
+        noise), never wider. With a level margin given, that margin is both.
+        """
+        if self.margin is not None:
+            return 0.0, self.margin, self.margin
+        swing = abs(kink.before) * self.th.half_width
+        if self.th.dead_zone_swing > 0:
+            swing = min(swing, self.th.dead_zone_swing)
+        wide = self.th.no_load(self.dir, self.moving)[1]
+        noise = noise if math.isfinite(noise) else self.th.noise
+        own = self.th.no_load(self.dir, self.moving, swing=swing,
+                              slope=min(self.th.slope_loaded, max(kink.after, 0.0)), noise=noise)[1]
+        return swing, wide, min(own, wide)
+
+    def _taut_without_edge(self, c: np.ndarray) -> bool:
+        """Whether a search that began slack has met a taut tendon without an edge to take: the
+        last :data:`AFTER_STEPS` readings all off the no-load band on the side it moves to (the
+        identification's band, the widest). Only once: never after a taut start, a turn or a
+        contact, so a search crosses the dead zone at most once."""
+        if self.start_outside or self.contacts or self.th.current_dead_zone is None or c.size < AFTER_STEPS:
+            return False
+        return all(self._taut_side(float(v)) == self.dir for v in c[-AFTER_STEPS:])
 
     def _watch_arrival(self, q: np.ndarray, c: np.ndarray, sig: float) -> None:
         """From a taut start: note where the unloading tendon's current meets the dead zone.
@@ -701,7 +877,7 @@ class _Search:
                     continue
                 sig = _reading_noise(c)
                 sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
-                kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
+                kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
                 # a start in the dead zone that has been loading from the first reading (no kink
                 # out of a flat stretch): a tendon was taut after all
                 if (kink is None and self.seg_from_start and not self.start_outside
@@ -716,16 +892,46 @@ class _Search:
                         self._turn_toward_slack(self.dir)
                         continue
                 self._watch_arrival(q, c, sig)
-                if kink is None:
-                    continue
-                ok, why = self._judge(kink)
-                if ok:
+                self.ready = None
+                status, why = (None, "") if kink is None else self._judge(kink)
+                if status in (None, DOUBT, REFUSE) and (
+                        kink is not None or _ls_slope(q[-4:], c[-4:]) >= 0.5 * self.th.eps_lower):
+                    # no edge on the reading identification makes of a whole sweep's many points:
+                    # read the search's few noisy ones more strictly (as many straight pieces as
+                    # their noise pays for, the flat stretch without the unloading that led into
+                    # it). An edge found so is held in reserve for RESERVE_STEPS readings past it,
+                    # or until the search can go no further: where the first reading finds one
+                    # meanwhile, that one stands.
+                    alt = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0,
+                                       strict_flat=True, select=True, convex=True)
+                    if alt is not None and alt != kink:
+                        alt_status, alt_why = self._judge(alt)
+                        if alt_status == ACCEPT and alt.n_after < RESERVE_STEPS:
+                            alt_status = READY
+                        if alt_status not in (DOUBT, REFUSE) or kink is None:
+                            kink, status, why = alt, alt_status, alt_why
+                if status == ACCEPT:
                     return LOAD, kink
+                if status == READY:
+                    self.ready = kink
                 if why:
                     self.pending_refusal = why
+                if (kink is None or status == REFUSE) and self.ready is None and self._taut_without_edge(c):
+                    # the tendon ahead is taut and no edge could be read on the way to it (an
+                    # edge a step or two from the start, one the model cannot give an offset
+                    # from): the other edge lies across the dead zone, as from a taut start. (A
+                    # kink only doubtful yet is given the readings that may make it clear.)
+                    self.turned = True
+                    self._turn_toward_slack(self.dir)
         except _LimitReached as lim:
+            if self.ready is not None:
+                # the edge passed every check on the readings there are: the search can go no
+                # further to lengthen its loaded stretch
+                return LOAD, self.ready
             why = f"; the last candidate was refused: {self.pending_refusal}" if self.pending_refusal else ""
-            where = (" (it started with a tendon taut and went through the dead zone toward the other edge)"
+            where = (" (it met a taut tendon with no edge to read and went through the dead zone toward the "
+                     "other edge)" if self.turned else
+                     " (it started with a tendon taut and went through the dead zone toward the other edge)"
                      if self.start_outside else "")
             raise ShiftDetectionError(
                 f"knob {self.knob}: no edge found within {self.steps} steps / {self.travel:.1f} deg of knob "
@@ -856,6 +1062,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
     search.plateaus = {1: km.b_neg, -1: km.b_pos}
     ident = model.identification.get(k)
+    if ident is not None and ident.stderr:
+        search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
     arrive = {1: None if ident is None else ident.current_arrive_rising,
               -1: None if ident is None else ident.current_arrive_falling}
     if all(v is None for v in arrive.values()):
@@ -866,11 +1074,6 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         d = search.dir
         if kind == LOAD:
             edge = "pos" if d > 0 else "neg"
-            if f"d_{edge}" in th.unfixed:
-                raise ShiftDetectionError(
-                    f"knob {k}: a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
-                    f"place d_{edge} (its dead-zone flat was too narrow to see on the sweep), so that edge gives "
-                    "no offset; identify on a slower sweep")
             offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
             a = search.arrival
             ref = arrive.get(d)

@@ -1,16 +1,87 @@
-"""Reading a stepping search's few noisy readings (hystcli.current.loading_edge's stricter
-options), where the plant zoo found the reading made for a sweep's many points missing or
-misplacing an edge (issue 10).
+"""Algorithm 1 (hystcli.shift) where the plant zoo found it refusing a readable edge or taking a
+wrong one (issue 10): an edge too close to the start, an unloading tendon led into a steep edge,
+an identification whose figures are whole-sweep upper bounds, quantised readings, a no-load level
+that lies off the sweep's, a tendon's backlash plateau, and an edge the model itself does not pin.
 
 Every current below is a law written here by hand, so the true edges are known exactly; every
-reference value is from that law, never from the code tested.
+reference value is from that law (or the straight model's numbers), never from the code tested.
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hystcli.current import loading_edge, pieces
+from hystcli.current import kink_fit, loading_edge, pieces
+from hystcli.errors import ShiftDetectionError
+from hystcli.model import KnobIdentification, KnobModel, Model
+from hystcli.shift import ProbeSample, detect_shift
+
+# the straight model: dead zone [-5, 9] (14 deg wide)
+STRAIGHT = KnobModel(d_pos=9.0, d_neg=-5.0, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
+WIDTH = STRAIGHT.d_pos - STRAIGHT.d_neg
+
+
+def model(slope_dead_zone: float = 0.5, slope_loaded: float = 4.0, **ident) -> Model:
+    """The straight model with what identify would store: no-load 120 mA, 126 moving up and 114
+    down (a Coulomb friction of 6 mA), the given slopes (eps_lower is their geometric mean,
+    eps_upper five times the loaded one)."""
+    kw = dict(current_dead_zone=120.0, no_load_rising=126.0, no_load_falling=114.0)
+    kw.update(ident)
+    return Model({1: STRAIGHT}, identification={1: KnobIdentification(slope_dead_zone, slope_loaded, -40.0, 40.0,
+                                                                      **kw)})
+
+
+class Knob:
+    """One knob read at rest after each step: current ``law(q, d)`` (``d`` the direction of the
+    step just made) plus seeded white noise, optionally quantised to ``quantum`` mA."""
+
+    def __init__(self, law, start: float = 0.0, noise: float = 0.3, seed: int = 0,
+                 quantum: float | None = None) -> None:
+        self.law, self.q, self.noise, self.quantum = law, float(start), noise, quantum
+        self.rng = np.random.default_rng(seed)
+        self.moves: list[float] = []
+
+    def position(self) -> float:
+        return self.q
+
+    def step_to(self, q: float) -> ProbeSample:
+        d = 1.0 if q > self.q else -1.0
+        self.q = float(q)
+        self.moves.append(self.q)
+        c = self.law(self.q, d) + self.rng.normal(0.0, self.noise)
+        if self.quantum:
+            c = self.quantum * round(c / self.quantum)
+        return ProbeSample(self.q, c)
+
+    def stop(self) -> None:
+        pass
+
+
+def tendons(dn: float, dp: float, k: float = 4.0, pre: float = 0.0, coulomb: float = 6.0):
+    """Signed current with the dead zone [dn, dp]: loaded slope ``k`` past either edge, a
+    pretension slope ``pre`` everywhere, the motor's Coulomb friction with the direction."""
+    mid = 0.5 * (dn + dp)
+
+    def law(q: float, d: float) -> float:
+        return 120.0 + coulomb * d + pre * (q - mid) + k * (max(q - dp, 0.0) - max(dn - q, 0.0))
+    return law
+
+
+# --------------------------------------------------------------------------------------------
+# an edge a step or two from where the knob rests
+# --------------------------------------------------------------------------------------------
+def test_a_kink_with_no_dead_zone_behind_it_is_not_taken_the_far_edge_is():
+    # the knob rests 1.3 deg short of the positive edge (dead zone [-12.7, 1.3]: the straight one
+    # shifted by -7.7), a pretensioned current (0.5 mA/deg across the dead zone): two readings
+    # before the edge are no dead zone to read a kink out of. The search meets the taut tendon,
+    # turns, and takes the negative edge after a long flat stretch.
+    dn, dp = -12.7, 1.3
+    law = tendons(dn, dp, pre=0.5)
+    for seed in range(8):
+        r = detect_shift(model(slope_dead_zone=0.5), Knob(law, seed=seed), 1)
+        assert r.edge == "neg" and r.direction == -1, seed
+        assert r.evidence.n_before >= 4, seed
+        assert r.offset == pytest.approx(dn - STRAIGHT.d_neg, abs=0.25), seed
 
 
 # --------------------------------------------------------------------------------------------
@@ -52,8 +123,6 @@ def test_a_loaded_side_may_stiffen_but_a_sag_is_not_fitted_as_one():
     # a stiffening tendon (4 mA/deg at the edge, +0.2 mA/deg per deg past it) keeps its quadratic
     # term; a loaded current that sags over its last 3 deg (a replay slowing into its own turn,
     # its friction fading) is fitted straight, as no tendon softens
-    from hystcli.current import kink_fit
-
     rng = np.random.default_rng(15)
     q = np.arange(0.0, 20.01, 0.5)
     x = np.maximum(q - 10.0, 0.0)
@@ -67,3 +136,119 @@ def test_a_loaded_side_may_stiffen_but_a_sag_is_not_fitted_as_one():
     short = q <= 14.0
     assert kink_fit(q[short], sag[short], 1, min_side=2, resolution=0.02, convex=True) == \
         kink_fit(q[short], sag[short], 1, min_side=2, resolution=0.02)
+
+
+# --------------------------------------------------------------------------------------------
+# the identification's figures are whole-sweep upper bounds
+# --------------------------------------------------------------------------------------------
+def test_a_wall_in_the_sweep_does_not_hide_the_edge():
+    # the sweep met a wall: its 'loaded' slope is 300 mA/deg, so the identification's no-load
+    # band is 300 mA wide; this tendon loads at 25 mA/deg. The edge at -17 (dead zone [-17, -3])
+    # is read anyway, on the band of the search's own readings
+    m = model(slope_dead_zone=2.0, slope_loaded=300.0)
+    r = detect_shift(m, Knob(tendons(-17.0, -3.0, k=25.0), start=-10.0, seed=4), 1, direction=-1)
+    assert r.edge == "neg" and r.edge_found_at == pytest.approx(-17.0, abs=0.15)
+    assert r.offset == pytest.approx(-12.0, abs=0.15)
+
+
+def test_a_noisy_sweep_does_not_hide_an_edge_at_the_travel_limit():
+    # the sweep's dead-zone slope (noise included) was 3 mA/deg: a swing of 21 mA across the
+    # half-width, where this flat current does not move at all. The edge at 6 (dead zone
+    # [-8, 6]) is 3.5 deg short of the travel limit: the current never leaves the sweep's band
+    # before the limit, but it does leave the search's own, and the edge is taken there
+    m = model(slope_dead_zone=3.0, slope_loaded=4.0)
+    p = Knob(tendons(-8.0, 6.0), seed=5)
+    r = detect_shift(m, p, 1, max_travel=9.5)
+    assert r.edge == "pos" and r.edge_found_at == pytest.approx(6.0, abs=0.2)
+    assert r.offset == pytest.approx(-3.0, abs=0.2)
+    assert max(p.moves) <= 9.5
+
+
+# --------------------------------------------------------------------------------------------
+# quantised readings of a pretensioned current
+# --------------------------------------------------------------------------------------------
+def test_quantised_readings_are_not_cut_into_little_steep_pieces():
+    # 1 mA quantisation on a pretensioned current (1 mA/deg everywhere, 5 mA/deg past an edge):
+    # a split into five pieces spends them on the staircase of the dead zone
+    law = tendons(-2.4, 11.6, k=4.0, pre=1.0)
+    for seed in range(4):
+        r = detect_shift(model(slope_dead_zone=1.0), Knob(law, noise=0.3, seed=seed, quantum=1.0), 1)
+        assert r.offset == pytest.approx(2.6, abs=0.3), seed
+
+
+# --------------------------------------------------------------------------------------------
+# the no-load level of the search lies off the sweep's
+# --------------------------------------------------------------------------------------------
+def test_a_dead_zone_below_the_sweeps_no_load_level_is_read_by_how_far_the_current_goes():
+    # the search's dead zone sits 25 mA below the sweep's level moving up (a replay slower than
+    # the sweep, less viscous friction): the flat before the edge looks like a negative tendon's
+    # plateau, but the current then climbs as far past the sweep's level again and on, which no
+    # unloading tendon does (it stops at the no-load level)
+    base = tendons(-3.0, 11.0, k=8.0)
+
+    def law(q, d):
+        return base(q, d) - 25.0
+
+    r = detect_shift(model(slope_loaded=8.0), Knob(law, seed=6), 1)
+    assert r.edge == "pos" and r.offset == pytest.approx(2.0, abs=0.15)
+    assert r.evidence.level < 126.0 - 20.0          # the flat was well below the sweep's level
+
+
+def test_an_unloading_tendon_that_stops_at_the_no_load_level_is_still_no_edge():
+    # the mirror case: the negative tendon's plateau 25 mA below, then its unloading up to the
+    # no-load level, flat there: no edge (the positive one at 30 is beyond the travel limit)
+    def law(q, d):
+        unload = -25.0 + 5.0 * min(max(q - 2.0, 0.0), 5.0)     # plateau to q=2, slack at q=7
+        return 126.0 + unload + 4.0 * max(q - 30.0, 0.0)
+
+    with pytest.raises(ShiftDetectionError, match="no edge found"):
+        detect_shift(model(), Knob(law, seed=7), 1, max_travel=20.0)
+
+
+# --------------------------------------------------------------------------------------------
+# a tendon's backlash plateau
+# --------------------------------------------------------------------------------------------
+def test_a_plateau_of_the_tendon_ahead_is_not_its_edge():
+    # the positive tendon holds 8 mA (2 deg of its 4 mA/deg) since before the search, its tip
+    # on the backlash plateau: moving up, the current stays flat until the knob passes where
+    # that stretch ended (q = 6, the edge at 4 plus the 2 deg), then loads. Within the no-load
+    # tolerance, but 2 deg of the loaded slope above: not taken; the search turns and takes the
+    # negative edge (dead zone [-10, 4])
+    def law(q, d):
+        if d > 0:
+            return 126.0 + 8.0 + 4.0 * max(q - 6.0, 0.0)
+        return tendons(-10.0, 4.0)(q, d)
+
+    r = detect_shift(model(), Knob(law, seed=8), 1)
+    assert r.edge == "neg" and r.offset == pytest.approx(-5.0, abs=0.15)
+
+
+# --------------------------------------------------------------------------------------------
+# how surely the offset is placed
+# --------------------------------------------------------------------------------------------
+def test_an_edge_the_model_itself_does_not_pin_gives_no_offset_the_other_edge_does():
+    # the identification placed d_pos only to +-0.6 deg: the positive edge is not used, the
+    # negative one (+-0.05) is
+    m = model(stderr={"d_pos": 0.6, "d_neg": 0.05})
+    r = detect_shift(m, Knob(tendons(-6.0, 8.0), seed=9), 1)
+    assert r.edge == "neg" and r.offset == pytest.approx(-1.0, abs=0.15)
+
+
+def test_an_edge_the_identification_could_not_place_gives_way_to_the_other():
+    m = model(unfixed=("d_pos",))
+    r = detect_shift(m, Knob(tendons(-6.0, 8.0), seed=10), 1)
+    assert r.edge == "neg" and r.offset == pytest.approx(-1.0, abs=0.15)
+
+
+def test_a_faint_edge_is_placed_within_half_a_degree_or_refused():
+    # 1.5 mA/deg past the edge at 6 against 1.5 mA of noise per reading, the travel limit 4 deg
+    # past it: a kink the readings place only loosely is no offset
+    law = tendons(-8.0, 6.0, k=1.5)
+    m = model(slope_dead_zone=0.2, slope_loaded=1.5)
+    for seed in range(8):
+        try:
+            r = detect_shift(m, Knob(law, noise=1.5, seed=seed), 1, max_travel=10.0)
+        except ShiftDetectionError as exc:
+            assert "no edge found" in str(exc)
+            continue
+        assert r.offset == pytest.approx(-3.0, abs=0.5), seed
