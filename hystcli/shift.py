@@ -45,7 +45,7 @@ real current is not one law:
   (:data:`AFTER_STEPS`, over 1.5 deg): a kink a step from where the readings begin has no dead
   zone behind it. The offset must be placed to
   :data:`MAX_OFFSET_SE`: the kink's standard error (a loosely placed kink waits for more of the
-  loaded stretch), the model's edge's (from the identification), and, on the stretch from where
+  loaded stretch) and, on the stretch from where
   the search began, how far back the edge would lie were the flat the taken-up tendon's backlash
   plateau (its level above the no-load band, in degrees of the loaded slope). A flat below the
   band (a no-load level lying off the sweep's: speed, backlash on the sweep's dead zone) counts
@@ -87,9 +87,16 @@ AFTER_STEPS = 4
 
 MAX_OFFSET_SE = 0.25
 """Largest standard error (deg) of an offset taken (two of them: the half degree an offset must
-be good to): the kink's, that of the model's edge it is measured from (the identification's), and
-how far back a possible backlash plateau would put the edge, combined. A search whose kink is less
-sure waits for more of the loaded stretch; one whose model edge or plateau is, refuses that edge."""
+be good to): the kink's and how far back a possible backlash plateau would put the edge,
+combined (the model edge's own is judged apart: :data:`MAX_MODEL_SE`). A search whose kink is less
+sure waits for more of the loaded stretch; one whose plateau is, refuses that edge."""
+
+MAX_MODEL_SE = 1.0
+"""Largest standard error (deg) of the model's edge an offset is measured from: beyond it the
+identification itself cannot place the edge well enough for an offset to mean anything. Below
+it, the offset's own evidence (:data:`MAX_OFFSET_SE`) is the search's kink and plateau alone:
+a sample sweep's fit on the twin states +-0.5 deg for its edges (the creep and lag of a fast
+sweep), and an offset from it is as good as that model, which the user already holds."""
 
 ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
@@ -725,9 +732,12 @@ class _Search:
             return REFUSE, (f"a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
                             f"place {edge} (its dead-zone flat was too narrow to see on the sweep), so that edge "
                             "gives no offset; identify on a slower sweep")
-        if model_se > MAX_OFFSET_SE:
+        if model_se > MAX_MODEL_SE:
             return REFUSE, (f"the model's {edge} is itself known only to +-{model_se:.2f} deg (its "
                             "identification's standard error): no offset from it is surer than that")
+        # the identification's own uncertainty is the user's to judge (it is in the model file and
+        # in identify's report); the search answers for its own kink only
+        model_se = 0.0
         c0 = self.th.no_load(self.dir, self.moving)[0]
         if c0 is None:
             return self._placed(kink, model_se, 0.0) or (ACCEPT, "")

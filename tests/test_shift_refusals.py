@@ -227,11 +227,16 @@ def test_a_plateau_of_the_tendon_ahead_is_not_its_edge():
 # how surely the offset is placed
 # --------------------------------------------------------------------------------------------
 def test_an_edge_the_model_itself_does_not_pin_gives_no_offset_the_other_edge_does():
-    # the identification placed d_pos only to +-0.6 deg: the positive edge is not used, the
-    # negative one (+-0.05) is
-    m = model(stderr={"d_pos": 0.6, "d_neg": 0.05})
+    # the identification placed d_pos only to +-1.2 deg (beyond MAX_MODEL_SE, 1 deg): the
+    # positive edge is not used, the negative one (+-0.05) is
+    m = model(stderr={"d_pos": 1.2, "d_neg": 0.05})
     r = detect_shift(m, Knob(tendons(-6.0, 8.0), seed=9), 1)
     assert r.edge == "neg" and r.offset == pytest.approx(-1.0, abs=0.15)
+    # +-0.6 deg (a fast sweep's fit on the twin states +-0.5): the edge is the user's model, and
+    # the search answers for its own kink: the positive edge is taken
+    m = model(stderr={"d_pos": 0.6, "d_neg": 0.05})
+    r = detect_shift(m, Knob(tendons(-6.0, 8.0), seed=9), 1)
+    assert r.edge == "pos" and r.offset == pytest.approx(-1.0, abs=0.15)
 
 
 def test_an_edge_the_identification_could_not_place_gives_way_to_the_other():
