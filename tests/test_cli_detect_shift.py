@@ -143,3 +143,22 @@ def test_usage_errors_exit_2(files, tmp_path):
 def test_help_has_an_example():
     res = runner.invoke(app, ["detect-shift", "--help"])
     assert res.exit_code == 0 and "hyst detect-shift --model" in res.stdout
+
+
+def test_the_readme_walk_through_steps_1_and_2(tmp_path):
+    # README "A walk through the method": identify the sample sweep (its fast-sweep fit states
+    # +-0.5 deg for its edges), then detect the shift on the alpha=90 replay. An offset must come
+    # back (a stricter rule once refused it for the model edge's own uncertainty), and the edge
+    # found must be the twin's: ice-a knob 1 has d_pos 18.8, and alpha=90 shifts it by 27.45
+    # (the twin's calibrated shift, README step 2), so the positive edge lies at 46.25 deg
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1] / "sample_data" / "ice-a"
+    mp, out = tmp_path / "model.json", tmp_path / "shifted.json"
+    res = runner.invoke(app, ["identify", str(root / "sweep_knob1.csv"), "-o", str(mp), "-q"])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(root / "replay_alpha90_knob1.csv"),
+                              "-o", str(out), "-q"])
+    assert res.exit_code == 0, res.output
+    k0, k1 = load_model(mp).knob(1), load_model(out).knob(1)
+    assert abs(k1.offset + k0.d_pos - 46.25) <= 0.6
