@@ -735,12 +735,11 @@ class _Search:
         if model_se > MAX_MODEL_SE:
             return REFUSE, (f"the model's {edge} is itself known only to +-{model_se:.2f} deg (its "
                             "identification's standard error): no offset from it is surer than that")
-        # the identification's own uncertainty is the user's to judge (it is in the model file and
-        # in identify's report); the search answers for its own kink only
-        model_se = 0.0
+        # below that, the identification's own uncertainty is the user's to judge (it is in the
+        # model file and in identify's report); the search answers for its own kink only
         c0 = self.th.no_load(self.dir, self.moving)[0]
         if c0 is None:
-            return self._placed(kink, model_se, 0.0) or (ACCEPT, "")
+            return self._placed(kink, 0.0) or (ACCEPT, "")
         swing, band_wide, band_own = self._level_bands(kink, noise)
         # the flat's level at the kink and the last reading's, loading-positive, from the no-load
         # level of the sweep
@@ -759,7 +758,7 @@ class _Search:
         if excess > 0 and self.seg_from_start and not self.start_outside and kink.after > 0:
             rn = noise if math.isfinite(noise) else self.th.noise
             plateau = max(excess - 4.0 * rn, 0.0) / kink.after
-        placed = self._placed(kink, model_se, plateau)
+        placed = self._placed(kink, plateau)
         if placed is not None:
             return placed
         # A tendon taken up pulls the current out of the no-load band on its own side; a tendon
@@ -777,16 +776,16 @@ class _Search:
             return ACCEPT, ""
         return READY, ""
 
-    def _placed(self, kink, model_se: float, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
-        """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (the
-        model's edge or a possible plateau is too unsure: more readings would not help) or a
-        wait with the reason (a longer loaded stretch places the kink better)."""
+    def _placed(self, kink, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
+        """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (a
+        possible plateau is too unsure: more readings would not help) or a wait with the reason
+        (a longer loaded stretch places the kink better)."""
         if plateau > MAX_OFFSET_SE:
             return REFUSE, (f"the kink at {kink.at:.2f} deg starts from {kink.level:.1f} mA, off the no-load level "
                             "toward the tendon taken up: it may be that tendon's backlash plateau (taut since before "
                             f"the search), which would put the edge up to {plateau:.2f} deg back")
-        if math.hypot(kink.se, model_se, plateau) > MAX_OFFSET_SE:
-            need = math.sqrt(max(MAX_OFFSET_SE ** 2 - model_se ** 2 - plateau ** 2, 0.0))
+        if math.hypot(kink.se, plateau) > MAX_OFFSET_SE:
+            need = math.sqrt(max(MAX_OFFSET_SE ** 2 - plateau ** 2, 0.0))
             why = f"the kink at {kink.at:.2f} deg is placed only to +-{kink.se:.2f} deg (needs {need:.2f})"
             # the fit's loaded stretch ends before the last reading when a steeper one follows (a
             # wall, a stiffening cable): more readings would not place the kink any better

@@ -265,8 +265,10 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                 wfit = fit_tip(q, y, starts, keep=chk.reversals, walls=walls)
                 free = tip_predict(wfit.theta, q)
                 wmis = systematic_misfit(at_walls(free, walls, y) - y, fs)
-                held = [(free[y >= top] > top).mean() for top in walls[1:] if top is not None]
-                held += [(free[y <= bottom] < bottom).mean() for bottom in walls[:1] if bottom is not None]
+                # the free loop must go beyond each wall where the tip sits at it
+                bottom, top = walls
+                held = ([] if top is None else [(free[y >= top] > top).mean()]) + \
+                       ([] if bottom is None else [(free[y <= bottom] < bottom).mean()])
                 if wmis <= MAX_MISFIT and wmis < 0.5 * misfit and min(held) >= 0.5:
                     fit, misfit = wfit, wmis
                     where_wall = " and ".join(f"at {lvl:+.2f} deg" for lvl in wall_levels(walls, y) if lvl is not None)
