@@ -436,3 +436,20 @@ def test_current_only_ignores_a_kink_where_a_held_load_starts_to_unload(seed):
     fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
     for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
         assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+
+
+@pytest.mark.parametrize("seed,family", [(88, "coulomb-viscous"), (660, "pretension"), (253, "coulomb-viscous")])
+def test_current_only_reads_a_plateau_tilted_like_the_dead_zone(seed, family):
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plants (design seeds): a pretensioned tendon's spring, or the motor's viscous
+    # term following the sine's speed, tilts the backlash plateau as much as the dead zone; the
+    # load itself holds. Before, the plateau had to be flat against the unloading slope and
+    # identify refused "no backlash plateau" on all three.
+    case = plants.sweep_case(seed, tip=False)
+    assert case.family == family and case.current_shows_backlash
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert name in fit.stderr
+        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name

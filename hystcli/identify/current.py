@@ -239,7 +239,12 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     # over the plateau's width (a fall at least twice the unloading slope, longer than the
     # motor's own Coulomb flip at a reversal, which is over within a degree or two)
     before = range(ju)
-    plateau = any(abs(slopes[k]) <= 0.15 * unload and lengths[k] >= 1.0 for k in before)
+    # held: flat, or no steeper than the dead zone's own slope (a pretensioned tendon's spring, or
+    # the motor's viscous term following the sine's speed, tilt the plateau the same as the dead
+    # zone: the load itself does not change)
+    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload else 0.0
+    plateau = any(min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * unload and lengths[k] >= 1.0
+                  for k in before)
     flip = sum(lengths[k] for k in before if slopes[k] >= 2.0 * unload) >= 2.0
     if not (plateau or flip):
         return None, False
