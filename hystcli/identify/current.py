@@ -186,11 +186,15 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
     plateau, held = None, False
-    if from_reversal and xa.size >= 10:
-        # from the reversal on (the slow start included): its own pieces, its own dead zone
-        pa = pieces(xa, va, minlen)
+    # from the reversal on (the slow start included), up to the next reversal's own rounding: a
+    # drop at that reversal, spread backward by a zero-phase filter, would take one of the pieces
+    # the plateau, the unloading, the dead zone and the loading need
+    head = tt <= tt[-1] - GUARD_S if stop < q.size - 1 else np.ones(tt.size, bool)
+    xp, vp = _bins(x[head], cc[head], width) if head.sum() >= 12 else (xa, va)
+    if from_reversal and xp.size >= 10:
+        pa = pieces(xp, vp, minlen)
         sa = [d * m for (_, _, m, _) in pa]
-        plateau, held = _plateau(pa, sa, xa, sig, from_reversal, _dead_piece(pa, sa, xa, edge_piece(pa, sa, xa, sig)))
+        plateau, held = _plateau(pa, sa, xp, sig, from_reversal, _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)))
     # the slope over the stretch's last END_TRAVEL deg (least squares on the bins): what the
     # load did just before the next reversal
     last = xa >= xa[-1] - END_TRAVEL if xa.size else xa.astype(bool)
