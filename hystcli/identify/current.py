@@ -69,6 +69,8 @@ class Stretch:
     end_slope : float or None
         dC/dq (loading-positive) over the stretch's last degrees before its end: steeper than
         the loaded slope at the edge when a wall or a stiffening cable took the load there.
+    resolution : float
+        Width of the knob-angle bins the current was read on (deg).
     arrival : Kink or None
         Where the unloading tendon's current arrives at the dead zone (a stretch from a reversal).
     """
@@ -85,6 +87,7 @@ class Stretch:
     arrival: Kink | None = None
     plateau_held: bool = False
     end_slope: float | None = None
+    resolution: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -201,10 +204,10 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     end_slope = float(np.polyfit(xa[last], va[last], 1)[0]) if last.sum() >= 4 else None
     if kink is None:
         return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival, plateau_held=held,
-                       end_slope=end_slope)
+                       end_slope=end_slope, resolution=width)
     return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
                    dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival,
-                   plateau_held=held, end_slope=end_slope)
+                   plateau_held=held, end_slope=end_slope, resolution=width)
 
 
 def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[float | None, bool]:
@@ -285,6 +288,8 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     for i, (a, b, d) in enumerate(chk.segments):
         stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
     edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
+    # the reading's resolution: the typical bin width (deg) of the stretches read
+    resolution = float(np.median([s.resolution for s in stretches])) if stretches else 0.5
     first_only: list[str] = []
     # the no-load current, roughly: the median level at which the stretches from a reversal saw
     # a tendon taken up, both ways (a kink read where a held load starts to unload sits far
@@ -320,7 +325,9 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             se = np.array([k.se for k in ks])
             edges[side] = float(np.median(at))
             spread = float(1.2533 * np.std(at, ddof=1) / math.sqrt(at.size)) if at.size > 1 else 0.0
-            edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size))
+            # never finer than the bins it was read on: the kink fits' own error knows nothing of
+            # how the current law rounds the corner (filtering, a stiffening cable, the law itself)
+            edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size), 0.5 * resolution)
             levels[d] = float(np.median([k.level for k in ks]))
         # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
         # complete branches (reversal to reversal) first: a stretch cut by the record's end is
@@ -352,7 +359,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
             backlash_se["pos" if d > 0 else "neg"] = max(
                 float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size)) if arr.size > 1 else 0.0,
-                0.5 * float(np.ptp(arr)), 0.1 if arr.size > 1 else 0.3)
+                0.5 * float(np.ptp(arr)), 0.1 if arr.size > 1 else 0.3, 0.5 * resolution)
     arrivals = {}
     for d in (1, -1):
         arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])
