@@ -485,3 +485,19 @@ def test_current_only_edge_uncertainty_is_no_finer_than_its_bins(seed, name):
     err = getattr(fit.model, name) - getattr(case.truth, name)
     assert abs(err) <= 2 * fit.stderr[name]
     assert fit.stderr[name] <= 0.5
+
+
+def test_an_edge_on_a_flat_a_few_hundredths_wide_is_not_claimed():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plant (design seed 1130): its tip never reaches either dead zone (heights 8 deg
+    # apart, backlash 0.1 deg), so a loop with 17-deg backlash and heights 1 deg apart fits as
+    # well; that fit left d_neg on a 0.04-deg flat and claimed it to +-0.04 deg, 2.94 deg from
+    # the truth (and detect-shift then measured from it)
+    case = plants.sweep_case(1130)
+    fit = identify(parse_run(case.record.csv_text(), source="z")).fits[1]
+    for name in ("d_pos", "d_neg"):
+        if name in fit.stderr:
+            assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 0.5, name
+    assert "d_neg" not in fit.stderr

@@ -65,6 +65,12 @@ N_STARTS = 6
 FLAT_SAMPLES = 2
 """Fewest samples the fitted loop must put on a dead-zone flat for its edge to count as fixed."""
 
+FLAT_WIDTH = 0.5
+"""Narrowest dead-zone flat (deg of knob) that fixes its edge apart from its height: a narrower
+one is a corner, which a tracker's filter or any rate effect rounds off; the fit can put it
+anywhere along the loaded line (a loop whose tip never reaches a dead zone trades the height
+step for backlash width, and leaves the edge on a flat a few hundredths of a degree wide)."""
+
 FLAT_CONTRAST = 4.0
 """How clearly a dead-zone flat must stand apart from the loaded lines either side of it:
 ``omega * width * sqrt(samples on it) >= FLAT_CONTRAST * noise`` (the step between the two
@@ -719,7 +725,7 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
             continue
         m = mask & (q >= lo_) & (q <= hi_)
         contrast = model.omega * (hi_ - lo_) * math.sqrt(m.sum()) / max(noise, 1e-12)
-        if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST:
+        if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH:
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
                          f"sample(s) of the fitted loop, a step of {model.omega * (hi_ - lo_):.2f} deg of tip: too little "
                          "against the tracker's noise to place the edge apart from the "
