@@ -416,7 +416,9 @@ def test_an_edge_the_tip_and_the_current_place_apart_is_not_claimed_when_both_lo
     case = plants.sweep_case(seed)
     fit = identify(parse_run(case.record.csv_text(), source="z")).fits[1]
     assert not {"d_neg", "b_pos", "b_neg"} & set(fit.stderr)
-    assert any("cannot tell them apart" in w for w in fit.warnings)
+    # said either way: the current's edge fits as well, or (seed 471, heights 10 deg apart) the
+    # fitted edge sits on a flat too narrow to fix it (FLAT_WIDTH)
+    assert any("cannot tell them apart" in w or "is not fixed by this record" in w for w in fit.warnings)
     assert "d_neg" in fit.ident.unfixed
     # what stays claimed is right
     for name in ("d_pos", "omega"):
