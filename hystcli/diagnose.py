@@ -757,9 +757,10 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         Called with a short message at each step.
     sweep : Run, optional
         The model's identification sweep. A time-dependent effect (a lag, latency, creep) is in
-        it too, and a fast sweep turns it into a wider, steeper identified loop; with the sweep,
-        those candidates bring the loop re-identified from it with the effect acting
-        (:mod:`hystcli.refit`), and a chosen one replaces the model's loop.
+        it too, and a fast sweep turns it into a wider, steeper identified loop; so is a coupling
+        when the sweep moves both knobs at once. With the sweep, those candidates bring the loop
+        re-identified from it with the effect acting (:mod:`hystcli.refit`), and a chosen one
+        replaces the model's loop.
 
     Returns
     -------

@@ -187,6 +187,22 @@ def test_the_magnitude_drive_is_the_other_sections_bend(form):
     np.testing.assert_allclose(on, want, rtol=0, atol=1e-12)
 
 
+@settings(max_examples=15, deadline=None)
+@given(st.sampled_from(MAGNITUDE), st.lists(st.integers(1, len(T) - 1), min_size=1, max_size=5, unique=True))
+def test_the_bend_drive_in_pieces_gives_the_samples_of_one_call(form, cuts):
+    # the live twin: the other section's bend carried in the ChainState across pieces
+    effs = (E.make_effect("coupling", form, gain=0.2),)
+    kn = {k: CAT.knobs[k].with_offset(o) for k, o in zip((1, 2), CAT.true_offsets(BENT).values())}
+    bounds = [0, *sorted(cuts), len(T)]
+    for k in (1, 2):
+        whole = E.tip_chain(kn[k], k, Q, T, effs, BENT, 0.0, other_knob=kn[3 - k], other_y0=1.5).y
+        state = E.ChainState()
+        parts = [E.tip_chain(kn[k], k, {j: Q[j][a:b] for j in (1, 2)}, T[a:b], effs, BENT, 0.0, state,
+                             other_knob=kn[3 - k], other_y0=1.5).y
+                 for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        assert np.array_equal(np.concatenate(parts), whole)
+
+
 @settings(max_examples=20, deadline=None)
 @given(st.sampled_from(MAGNITUDE), st.floats(-0.4, 0.4), st.floats(-15.0, 15.0), st.floats(-15.0, 15.0))
 def test_forward_of_inverse_is_the_identity_for_the_magnitude_drive(form, gain, o1, o2):
