@@ -758,7 +758,7 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     sweep : Run, optional
         The model's identification sweep. A time-dependent effect (a lag, latency, creep) is in
         it too, and a fast sweep turns it into a wider, steeper identified loop; so is a coupling
-        when the sweep moves both knobs at once. With the sweep, those candidates bring the loop
+        driven by the other bend when the sweep moves both knobs at once. With the sweep, those candidates bring the loop
         re-identified from it with the effect acting (:mod:`hystcli.refit`), and a chosen one
         replaces the model's loop.
 
@@ -805,7 +805,7 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
 def _loops(model: Model, sweep: Run):
     """The per-grid-point loops of :func:`_select` (``loops``): for a family whose every form is a
     time-dependent effect the straight sweep carries (:func:`hystcli.refit.applies`), and for a
-    coupling's input and output forms when the sweep moves both knobs
+    bend-driven coupling's input and output forms when the sweep moves both knobs
     (:func:`hystcli.refit.carries`), the knob models re-identified from the sweep with each grid
     point's effect acting."""
     sw = R.prepare_sweep(sweep, model)
@@ -818,7 +818,7 @@ def _loops(model: Model, sweep: Run):
         if etype.name in done:
             return done[etype.name]
         # a time-dependent family whose every form the sweep carries, or a coupling when the sweep
-        # moves both knobs (its dead-zone forms keep the model's loop)
+        # moves both knobs (its other forms keep the model's loop)
         if etype.driver in R.DRIVERS:
             if not all(R.carries(etype, f, sw) for f in etype.forms):
                 done[etype.name] = None
