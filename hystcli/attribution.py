@@ -7,7 +7,8 @@ by group, on physical regressors that name a cause without assuming its form:
 regressor              columns (each beside the generic loop terms 1, dir, dir*m, y)
 =====================  ======================================================================
 other knob angle       q_o * (1, m, dir, dir*m, side)  (q_o: the other knob's command)
-other knob magnitude   a * (1, m, dir, dir*m, side)    (a = |q_o - offset_o|: its bend's size)
+other knob magnitude   a * (1, m, dir, dir*m, side)    (a = |yhat_o|: its section's bend as its
+                                                     base model predicts it, 0 in its dead zone)
 knob velocity          v, v*m                       (v = dq/dt)
 time since reversal    dir*exp(-s/tau), tau = 0.5, 2, 8 s  (s: time since the knob reversed)
 elapsed time           t - t0, (t - t0)*dir
@@ -95,7 +96,10 @@ def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, n
     groups: dict[str, np.ndarray] = {}
     o = p.q.get(3 - k)
     if o is not None:
-        a = np.abs(o - p.offsets.get(3 - k, 0.0))
+        # the bend the magnitude coupling reads (hystcli/effects/coupling.py): the other knob's
+        # travel from its offset where its model is missing
+        bend = p.bend(3 - k)
+        a = np.abs(o - p.offsets.get(3 - k, 0.0)) if bend is None else np.abs(bend)
         groups["other knob angle"] = np.column_stack([o, o * m, o * d, o * d * m, o * side])
         groups["other knob magnitude"] = np.column_stack([a, a * m, a * d, a * d * m, a * side])
     groups["knob velocity"] = np.column_stack([v, v * m])

@@ -757,9 +757,10 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         Called with a short message at each step.
     sweep : Run, optional
         The model's identification sweep. A time-dependent effect (a lag, latency, creep) is in
-        it too, and a fast sweep turns it into a wider, steeper identified loop; with the sweep,
-        those candidates bring the loop re-identified from it with the effect acting
-        (:mod:`hystcli.refit`), and a chosen one replaces the model's loop.
+        it too, and a fast sweep turns it into a wider, steeper identified loop; so is a coupling
+        driven by the other bend when the sweep moves both knobs at once. With the sweep, those candidates bring the loop
+        re-identified from it with the effect acting (:mod:`hystcli.refit`), and a chosen one
+        replaces the model's loop.
 
     Returns
     -------
@@ -803,8 +804,10 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
 
 def _loops(model: Model, sweep: Run):
     """The per-grid-point loops of :func:`_select` (``loops``): for a family whose every form is a
-    time-dependent effect the straight sweep carries (:func:`hystcli.refit.applies`), the knob
-    models re-identified from the sweep with each grid point's effect acting."""
+    time-dependent effect the straight sweep carries (:func:`hystcli.refit.applies`), and for a
+    bend-driven coupling's input and output forms when the sweep moves both knobs
+    (:func:`hystcli.refit.carries`), the knob models re-identified from the sweep with each grid
+    point's effect acting."""
     sw = R.prepare_sweep(sweep, model)
     if sw is None:
         return None
@@ -814,18 +817,30 @@ def _loops(model: Model, sweep: Run):
     def loops(etype: EffectType, grid) -> list | None:
         if etype.name in done:
             return done[etype.name]
-        if not all(etype.driver in R.DRIVERS and f.stage in R.STAGES for f in etype.forms):
+        # a time-dependent family whose every form the sweep carries, or a coupling when the sweep
+        # moves both knobs (its other forms keep the model's loop)
+        if etype.driver in R.DRIVERS:
+            if not all(R.carries(etype, f, sw) for f in etype.forms):
+                done[etype.name] = None
+                return None
+        elif not any(R.carries(etype, f, sw) for f in etype.forms):
             done[etype.name] = None
             return None
-        out, prev = [], {}
-        for g in grid:
-            if g.effect is None or g.effect.is_null:
-                out.append(None)
+        out, prev = [None] * len(grid), {}
+        order = range(len(grid))
+        if etype.driver not in R.DRIVERS:
+            # a coupling's gain runs both ways from off: each side's continuation starts next to
+            # the sweep's own loop, not at the far end of the other side
+            order = sorted(order, key=lambda j: abs(grid[j].params[etype.get_form(grid[j].form).switch]))
+        for j in order:
+            g = grid[j]
+            if g.effect is None or g.effect.is_null or not R.carries(etype, g.effect.spec_form, sw):
                 continue
             # along a form's axis each refit starts where its neighbour ended (a continuation)
-            kn = R.refit(sw, model, g.effect, starts=prev.get(g.form), cache=cache)
-            prev[g.form] = kn
-            out.append(kn)
+            key = g.form if etype.driver in R.DRIVERS else (g.form, g.params[g.effect.spec_form.switch] > 0)
+            kn = R.refit(sw, model, g.effect, starts=prev.get(key), cache=cache)
+            prev[key] = kn
+            out[j] = kn
         done[etype.name] = out
         return out
 

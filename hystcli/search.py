@@ -57,18 +57,28 @@ class Prep:
     def two_knobs(self) -> bool:
         return len(self.q) > 1
 
+    def bend(self, k: int) -> np.ndarray | None:
+        """The bend of knob ``k``'s section as its base model predicts it (what the other knob's
+        magnitude coupling reads), None when ``k`` is not a knob of both the model and the run."""
+        kn = self.knobs.get(k)
+        if kn is None or k not in self.q:
+            return None
+        return kn.forward(self.q[k], float(self.y[k][0]))
+
     def signals(self, k: int) -> Signals:
         return Signals(k, self.t, self.q.get(3 - k), float(self.offsets.get(3 - k, 0.0)), float(self.y[k][0]),
-                       self.name)
+                       self.name, self.bend(3 - k))
 
     def acts(self, etype: EffectType, form: Form) -> bool:
         cond = None if (self.shape_stated and etype.driver == "shape") else self.condition
         return etype.acts_on(form, self.shape.total_curvature, cond, self.two_knobs)
 
     def trace(self, effects: Sequence[E.Effect], k: int) -> E.KnobTrace:
+        o = 3 - k
         return E.tip_chain(self.knobs[k], k, self.q, self.t, effects, self.shape, float(self.y[k][0]),
-                           condition=self.condition, other_offset=self.offsets.get(3 - k, 0.0), source=self.name,
-                           shape_stated=self.shape_stated)
+                           condition=self.condition, other_offset=self.offsets.get(o, 0.0), source=self.name,
+                           shape_stated=self.shape_stated, other_knob=self.knobs.get(o) if o in self.q else None,
+                           other_y0=float(self.y[o][0]) if o in self.y else 0.0)
 
     def predict(self, effects: Sequence[E.Effect]) -> dict[int, np.ndarray]:
         out = {}

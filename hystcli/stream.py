@@ -60,14 +60,12 @@ class _Hysteresis:
     ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
 
     __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
-                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "other_offset")
-    # (other_offset: the other knob's offset, the zero of a coupling driven by its bend's size)
+                 "y", "x", "fresh", "y0", "edges", "outputs", "k")
 
     def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect]) -> None:
         self.k = k
         self.edges = tuple(edges)          # coupling that moves the dead zone (reads the other knob)
         self.outputs = tuple(outputs)      # output stages: where the hysteresis starts behind a reading
-        self.other_offset = 0.0
         self.y0 = 0.0
         self.set_knob(kn)
         self.reset(0.0)
@@ -84,8 +82,9 @@ class _Hysteresis:
 
     def _start(self, other: float | None) -> None:
         # the hysteresis state behind the tip reading y0 at rest, as the batch inverse starts it
+        # (what the coupling sees of the other knob: its command, or its bend for the magnitude forms)
         other_arr = None if other is None else np.array([other])
-        sig = Signals(self.k, None, other_arr, self.other_offset, 0.0, "stream")
+        sig = Signals(self.k, None, other_arr, 0.0, 0.0, "stream", other_arr)
         yh0 = self.y0
         for e in reversed(self.outputs):
             yh0 = e.type.at_rest(e, yh0, sig)
@@ -103,7 +102,7 @@ class _Hysteresis:
         b = a = 0.0
         if other is not None:
             for e in self.edges:
-                dp, dn = e.type.edges_at(e, other, self.other_offset)
+                dp, dn = e.type.edges_at(e, other)
                 b += dp
                 a += dn
         if r > y:
@@ -130,6 +129,40 @@ class _Hysteresis:
     def plain(self) -> bool:
         """True when the compiled kernel of :mod:`hystcli.model` gives this stage's numbers."""
         return not self.edges
+
+
+class _Bend:
+    """The forward hysteresis of DESIGN.md section 3 one sample at a time (``_forward_py``: the
+    same operations): a knob's bend as its base model predicts it, what the other knob's
+    magnitude coupling reads (:mod:`hystcli.effects.coupling`)."""
+
+    __slots__ = ("kn", "y")
+
+    def __init__(self, kn: KnobModel) -> None:
+        self.kn = kn
+        self.y = 0.0
+
+    def reset(self, y0: float = 0.0) -> None:
+        self.y = float(y0)
+
+    def step(self, q: float, t: float = 0.0) -> float:
+        offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg = self.kn._kernel_args()
+        u = q - offset
+        lo = h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
+        hi = h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
+        y = self.y
+        if y < lo:
+            y = lo
+        if y > hi:
+            y = hi
+        self.y = y
+        return y
+
+    def save(self) -> float:
+        return self.y
+
+    def load(self, y: float) -> None:
+        self.y = y
 
 
 class _Knob:
@@ -160,8 +193,9 @@ class _Knob:
             s.load(v)
 
     def reset(self, y0: float) -> None:
+        # (this knob's bend, as the other knob's coupling sees it, starts from its own tip y0)
         for s in self.head + self.tail + self.seen:
-            if s is self.hyst:
+            if s is self.hyst or isinstance(s, _Bend):
                 s.reset(y0)
             else:
                 s.reset()
@@ -173,7 +207,7 @@ class _CompiledCoupling:
     call. The table owns the state of those stages (the Python stage objects of the tails and of
     ``seen`` then sit idle); the head stays in Python. Built only when every stage has an op."""
 
-    __slots__ = ("ops", "rng", "par", "st", "work", "kernel", "pending", "_params", "_fresh", "_hysts")
+    __slots__ = ("ops", "rng", "par", "st", "work", "kernel", "pending", "_params", "_fresh", "_hysts", "_bends")
 
     @classmethod
     def build(cls, c1: _Knob, c2: _Knob, plan: chain.Plan) -> "_CompiledCoupling | None":
@@ -208,6 +242,8 @@ class _CompiledCoupling:
             table.append((K.COUPLE, s))
         elif isinstance(s, _Hysteresis):
             table.append((K.HYST, s))
+        elif isinstance(s, _Bend):
+            table.append((K.BEND, s))
         else:
             return False
         return True
@@ -220,7 +256,8 @@ class _CompiledCoupling:
         rows = []
         for code, s in table:
             rows.append((code, n_par, n_st))
-            n_par += {K.COUPLE: 4, K.UNLAG: 3, K.HYST: 9 + 3 * len(getattr(s, "edges", ())), K.LAG: 1}[code]
+            n_par += {K.COUPLE: 3, K.UNLAG: 3, K.HYST: 9 + 2 * len(getattr(s, "edges", ())), K.LAG: 1,
+                      K.BEND: 8}[code]
             n_st += K.STATE_SIZE[code]
         self.ops, self.par, self.st, self.work = K.new_arrays(len(rows), n_par, n_st)
         for i, row in enumerate(rows):
@@ -229,6 +266,7 @@ class _CompiledCoupling:
         self._params = [(code, s, p) for (code, s), (_, p, _) in zip(table, rows)]
         self._fresh = [(code, st) for (code, _), (_, _, st) in zip(table, rows) if code in (K.UNLAG, K.LAG)]
         self._hysts = [(s, st) for (code, s), (_, _, st) in zip(table, rows) if code == K.HYST]
+        self._bends = [(s, st) for (code, s), (_, _, st) in zip(table, rows) if code == K.BEND]
         self.load_params()
         self.reset()
 
@@ -239,7 +277,9 @@ class _CompiledCoupling:
         par = self.par
         for code, s, p in self._params:
             if code == K.COUPLE:
-                par[p:p + 4] = (s.gain, s.sign, 1.0 if s.eff.form.endswith("-magnitude") else 0.0, s.other_offset)
+                par[p:p + 3] = (s.gain, s.sign, 1.0 if s.eff.form.endswith("-magnitude") else 0.0)
+            elif code == K.BEND:
+                par[p:p + 8] = s.kn._kernel_args()
             elif code == K.UNLAG:
                 par[p:p + 3] = (s.fraction, s.tau, s.lead)
             elif code == K.LAG:
@@ -248,9 +288,8 @@ class _CompiledCoupling:
                 par[p:p + 8] = s.kn._kernel_args()
                 par[p + 8] = len(s.edges)
                 for j, e in enumerate(s.edges):
-                    q = p + 9 + 3 * j
-                    par[q:q + 3] = (float(e["gain"]), 1.0 if e.form.endswith("-magnitude") else 0.0,
-                                    s.other_offset)
+                    q = p + 9 + 2 * j
+                    par[q:q + 2] = (float(e["gain"]), 1.0 if e.form.endswith("-magnitude") else 0.0)
 
     def reset(self) -> None:
         """Every stage at rest (the lags start on their first input); the hysteresis starts on
@@ -259,6 +298,8 @@ class _CompiledCoupling:
         for code, s in self._fresh:
             self.st[s] = 1.0          # fresh
             self.st[s + 4] = -1.0     # no sample interval seen yet
+        for b, s in self._bends:
+            self.st[s] = b.y          # a knob's bend starts from its tip reading (its _Bend's reset)
         self.work[:] = self.st
         self.pending = bool(self._hysts)
 
@@ -356,7 +397,9 @@ class Compensator:
         cut = next((i for i, (kind, e) in enumerate(kept) if two and chain._needs_other(kind, e, self._plan)),
                    len(kept))
         # the other knob as the cross-talk sees it: through the input lags before the first stage
-        # that reads the other knob (chain.inverse's `seen`)
+        # that reads the other knob (chain.inverse's `seen`), then, for a coupling driven by the
+        # bend's size, through the knob's base model forward (chain.other_bend)
+        bend = two and chain.reads_bend(self._plan)
         pre = []
         for e in self._plan.input:
             if e.type.cross_knob(e):
@@ -384,6 +427,8 @@ class Compensator:
                         raise ModelError(f"effect {e.label()} has no one-sample forward stage: the "
                                          "streaming compensator cannot run it with a coupling")
                     seen.append(fs(e))
+                if bend:
+                    seen.append(_Bend(model.knob(k)))
             self._chains[k] = _Knob(k, made[:cut], made[cut:], hyst, seen)
         self._coupled = two and cut < len(kept)
         # the coupled tails' per-sample fixed point as one compiled call, where every stage has an
@@ -482,16 +527,15 @@ class Compensator:
         self._refresh()
 
     def _refresh(self) -> None:
-        # the knob parameters under the shape/condition with the offsets now; the coupling's zero
-        offs = self.offsets
+        # the knob parameters under the shape/condition with the offsets now
         for k, ch in self._chains.items():
             kn = chain.condition_knob(self._model.knob(k), self._plan, self.shape, self.condition)
             ch.hyst.set_knob(kn)
-            oo = float(offs.get(3 - k, 0.0))
-            ch.hyst.other_offset = oo
-            for s in ch.head + ch.tail:
-                if hasattr(s, "other_offset"):
-                    s.other_offset = oo
+            # this knob's bend (what the other knob's magnitude coupling reads): its base model,
+            # not conditioned, with its offset now (chain.inverse's `bases`)
+            for s in ch.seen:
+                if isinstance(s, _Bend):
+                    s.kn = self._model.knob(k)
         if self._fast is not None:
             self._fast.load_params()
 

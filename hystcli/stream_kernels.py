@@ -13,16 +13,19 @@ The stages are an op table: each row ``[code, par, st]`` names an op and where i
 =========  ===================================================  ===============================
 code       one sample                                           par / state
 =========  ===================================================  ===============================
-COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, magnitude, other
-           forms), ``D = other`` or ``|other - other_offset|``;   offset / none
-           the identity when the other knob is not given yet
+COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, magnitude / none
+           forms), ``D = other`` or ``|other|`` (``other``: the
+           other knob's command, or its bend for the magnitude
+           forms); the identity when the other knob is not given
 UNLAG      :class:`hystcli.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
                                                                   u, z, tp, dt, e, c
 HYST       ``_Hysteresis.step`` of hystcli/stream.py (edges       the knob's 8 kernel args, n,
-           moved by the deadzone couplings)                       (gain, magnitude, other
-                                                                  offset) x n / y, x
+           moved by the deadzone couplings)                       (gain, magnitude) x n / y, x
 LAG        :class:`hystcli.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
            other knob's coupling sees of a command)
+BEND       ``_Bend.step`` of hystcli/stream.py: the knob's base   the knob's 8 kernel args / y
+           model forward, its bend as the other knob's
+           magnitude coupling sees it
 =========  ===================================================  ===============================
 
 Every op does the same IEEE operations in the same order as its Python stage, so a step gives
@@ -37,10 +40,10 @@ import math
 import numpy as np
 from numba import njit
 
-COUPLE, UNLAG, HYST, LAG = 0, 1, 2, 3
+COUPLE, UNLAG, HYST, LAG, BEND = 0, 1, 2, 3, 4
 """Op codes of the table (module notes)."""
 
-STATE_SIZE = {COUPLE: 0, UNLAG: 7, HYST: 2, LAG: 6}
+STATE_SIZE = {COUPLE: 0, UNLAG: 7, HYST: 2, LAG: 6, BEND: 1}
 """Floats of state per op."""
 
 
@@ -56,7 +59,7 @@ def _run(lo, hi, z, t, other, has_other, ops, par, st, work):
         if code == 0:  # COUPLE
             if has_other:
                 if par[p + 2] != 0.0:
-                    d = abs(other - par[p + 3])
+                    d = abs(other)
                 else:
                     d = other
                 if par[p + 1] > 0.0:
@@ -114,9 +117,9 @@ def _run(lo, hi, z, t, other, has_other, ops, par, st, work):
                 if has_other:
                     n = int(par[p + 8])
                     for j in range(n):
-                        q = p + 9 + 3 * j
+                        q = p + 9 + 2 * j
                         if par[q + 1] != 0.0:
-                            d = abs(other - par[q + 2])
+                            d = abs(other)
                         else:
                             d = other
                         half = 0.5 * par[q] * d
@@ -136,6 +139,17 @@ def _run(lo, hi, z, t, other, has_other, ops, par, st, work):
             work[s] = y
             work[s + 1] = x
             z = x
+        elif code == 4:  # BEND
+            u = z - par[p]
+            lo = par[p + 6] + par[p + 5] * (min(u - par[p + 3], 0.0) + max(u - par[p + 1], 0.0))
+            hi = par[p + 7] + par[p + 5] * (min(u - par[p + 2], 0.0) + max(u - par[p + 4], 0.0))
+            y = st[s]
+            if y < lo:
+                y = lo
+            if y > hi:
+                y = hi
+            work[s] = y
+            z = y
         else:  # LAG
             if st[s] != 0.0:
                 work[s] = 0.0
@@ -207,4 +221,4 @@ def new_arrays(n_ops: int, n_par: int, n_st: int) -> tuple[np.ndarray, np.ndarra
             np.zeros(max(n_st, 1)))
 
 
-__all__ = ["COUPLE", "HYST", "LAG", "STATE_SIZE", "UNLAG", "coupled_step", "new_arrays"]
+__all__ = ["BEND", "COUPLE", "HYST", "LAG", "STATE_SIZE", "UNLAG", "coupled_step", "new_arrays"]

@@ -297,7 +297,8 @@ def _knob_signals(catheter: VirtualCatheter, knobs: Mapping[int, KnobModel], q: 
             continue
         other = knobs.get(3 - k)
         tr = tip_chain(knob, k, q, t, effects, shape, 0.0, None if chain is None else chain[k],
-                       other_offset=0.0 if other is None else other.offset)
+                       other_offset=0.0 if other is None else other.offset,
+                       other_knob=other if (3 - k) in q else None)
         ys[k] = tr.y
         cs[k] = motor_current(tr.knob, catheter.current, q[k], t, x=tr.x, state=cstate) \
             + contact_current(tr, effects)

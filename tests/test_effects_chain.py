@@ -70,7 +70,8 @@ def test_every_form_switched_on_changes_the_prediction(name, form):
     assert max(float(np.max(np.abs(on[k] - base[k]))) for k in (1, 2)) > 0.1
 
 
-INVERTIBLE = [(n, f) for n, f in FORMS if n not in ("rate", "latency") and not f.startswith("output")]
+INVERTIBLE = [(n, f) for n, f in FORMS if n not in ("rate", "latency") and not f.startswith("output")] + [
+    ("coupling", "output-magnitude")]  # its drive, the other bend, holds where the other's command jumps
 
 
 @pytest.mark.parametrize("name, form", INVERTIBLE)
@@ -134,6 +135,86 @@ def test_an_output_coupling_is_undone_to_a_fraction_of_a_degree_and_says_so(form
         rmse = float(np.sqrt(np.mean((ys[k] - Q[k]) ** 2)))
         assert rmse < 0.3 < float(np.sqrt(np.mean((plain[k] - Q[k]) ** 2)))
     assert all("did not converge" in w for w in inv.warnings)
+
+
+MAGNITUDE = ["input-magnitude", "output-magnitude", "deadzone-magnitude"]
+
+
+@pytest.mark.parametrize("form", MAGNITUDE)
+def test_a_knob_resting_in_its_dead_zone_drives_no_magnitude_coupling(form):
+    # a bent one-knob run: knob 2 rests at 0, inside its dead zone, with the shift's offset on it;
+    # its section does not bend, so nothing moves knob 1's loop (its travel from the offset did)
+    model = Model(CAT.knobs, CAT.geometry)
+    run = Run({"t": T, "q1": Q[1], "q2": np.zeros_like(T)}, {"shape": str(BENT)})
+    o2 = model.offsets_for(run.meta)[2]
+    assert 1.0 < abs(o2) and CAT.knobs[2].d_neg < -o2 < CAT.knobs[2].d_pos
+    assert np.all(CAT.knobs[2].with_offset(o2).forward(run["q2"]) == 0.0)
+    eff = E.make_effect("coupling", form, gain=0.3)
+    base = E.predict(model, run)
+    on = E.predict(_model(eff), run)
+    assert np.array_equal(on[1], base[1])
+    # the twin's own data the same
+    sim = twin.simulate(CAT, T, {1: Q[1], 2: run["q2"]}, shape=BENT, effects=(eff,), noise=False)
+    plain = twin.simulate(CAT, T, {1: Q[1], 2: run["q2"]}, shape=BENT, effects=(), noise=False)
+    assert np.array_equal(sim["y1"], plain["y1"])
+
+
+@pytest.mark.parametrize("form", MAGNITUDE)
+def test_the_magnitude_drive_is_the_other_sections_bend(form):
+    # D = |yhat_o|: the other knob's base model (with its offset) on its command, from its first
+    # reading; on its backlash plateaus after a reversal the drive holds while the command moves
+    g = 0.2
+    run = Run({"t": T, "q1": Q[1], "q2": Q[2], "y1": np.full_like(T, 1.0), "y2": np.full_like(T, -2.0)},
+              {"shape": str(BENT)})
+    model = Model(CAT.knobs, CAT.geometry)
+    offs = model.offsets_for(run.meta)
+    kn = {k: CAT.knobs[k].with_offset(offs[k]) for k in (1, 2)}
+    bend = kn[2].forward(Q[2], -2.0)
+    plateau = np.r_[False, np.diff(bend) == 0.0] & np.r_[False, np.diff(Q[2]) != 0.0]
+    assert plateau.sum() > 50  # the drive holds there while |q2 - offset2| moves
+    on = E.predict(_model(E.make_effect("coupling", form, gain=g)), run)[1]
+    if form == "input-magnitude":
+        want = kn[1].forward(Q[1] - g * np.abs(bend), 1.0)
+    elif form == "output-magnitude":
+        want = E.tip_chain(kn[1], 1, Q, T, (), BENT, 1.0 - g * abs(bend[0])).y + g * np.abs(bend)
+    else:
+        # the edges move by half the drive each way
+        sig = E.Signals(1, T, Q[2], offs[2], 1.0, "run", bend)
+        dp, dn = E.EFFECTS["coupling"].edges(E.make_effect("coupling", form, gain=g), T.size, sig)
+        assert np.array_equal(dp, 0.5 * g * np.abs(bend)) and np.array_equal(dn, -dp)
+        want = E.tip_chain(kn[1], 1, Q, T, (E.make_effect("coupling", form, gain=g),), BENT, 1.0,
+                           other_knob=kn[2], other_y0=-2.0).y
+    np.testing.assert_allclose(on, want, rtol=0, atol=1e-12)
+
+
+@settings(max_examples=15, deadline=None)
+@given(st.sampled_from(MAGNITUDE), st.lists(st.integers(1, len(T) - 1), min_size=1, max_size=5, unique=True))
+def test_the_bend_drive_in_pieces_gives_the_samples_of_one_call(form, cuts):
+    # the live twin: the other section's bend carried in the ChainState across pieces
+    effs = (E.make_effect("coupling", form, gain=0.2),)
+    kn = {k: CAT.knobs[k].with_offset(o) for k, o in zip((1, 2), CAT.true_offsets(BENT).values())}
+    bounds = [0, *sorted(cuts), len(T)]
+    for k in (1, 2):
+        whole = E.tip_chain(kn[k], k, Q, T, effs, BENT, 0.0, other_knob=kn[3 - k], other_y0=1.5).y
+        state = E.ChainState()
+        parts = [E.tip_chain(kn[k], k, {j: Q[j][a:b] for j in (1, 2)}, T[a:b], effs, BENT, 0.0, state,
+                             other_knob=kn[3 - k], other_y0=1.5).y
+                 for a, b in zip(bounds[:-1], bounds[1:]) if b > a]
+        assert np.array_equal(np.concatenate(parts), whole)
+
+
+@settings(max_examples=20, deadline=None)
+@given(st.sampled_from(MAGNITUDE), st.floats(-0.4, 0.4), st.floats(-15.0, 15.0), st.floats(-15.0, 15.0))
+def test_forward_of_inverse_is_the_identity_for_the_magnitude_drive(form, gain, o1, o2):
+    # compensation solves both knobs by fixed point, the other bend from the other's last commands
+    model = _model(E.make_effect("coupling", form, gain=gain))
+    meta = {"shape": str(BENT), "offset1": str(o1), "offset2": str(o2)}
+    traj = Run({"t": T, "r1": Q[1], "r2": Q[2]}, meta)
+    inv = E.inverse(model, traj)
+    assert inv.warnings == ()
+    ys = E.predict(model, Run({"t": T, **{f"q{k}": inv.q[k] for k in (1, 2)}}, meta))
+    for k in (1, 2):
+        assert np.max(np.abs(ys[k] - Q[k])) < 1e-6
 
 
 @settings(max_examples=25, deadline=None)

@@ -45,3 +45,41 @@ def test_refit_cache_and_applies():
     assert a[1] is b[1]   # an output lag gives the sweep the input an input lag does: refitted once
     assert R.applies(E.make_effect("latency", "tracker", delay=0.1))
     assert not R.applies(E.make_effect("saturation", "smooth", limit=80.0))
+
+
+TRUE2 = KnobModel(d_pos=7.5, d_neg=-8.0, b_pos=4.8, b_neg=5.2, omega=1.4, h_pos=-3.2, h_neg=3.3, offset=0.0)
+
+
+def _two_knob_sweep(eff: E.Effect) -> Run:
+    # both knobs at once (phase-shifted triangles), each loop moved by the other section's bend
+    t = np.arange(0.0, 32.0, 0.01)
+    q1 = 40.0 * (2.0 / math.pi) * np.arcsin(np.sin(2 * math.pi * t / 8.0))
+    q2 = 40.0 * (2.0 / math.pi) * np.arcsin(np.sin(2 * math.pi * t / 11.0 + 1.0))
+    model = Model({1: TRUE, 2: TRUE2}, effects=(eff.spec(),))
+    ys = E.predict(model, Run({"t": t, "q1": q1, "q2": q2}))
+    rng = np.random.default_rng(1)
+    return Run({"t": t, "q1": q1, "q2": q2, "y1": ys[1] + rng.normal(0.0, 0.05, t.size),
+                "y2": ys[2] + rng.normal(0.0, 0.05, t.size)})
+
+
+def test_a_two_knob_sweep_carries_a_bend_coupling_and_the_refit_takes_it_off():
+    for form in ("input-magnitude", "output-magnitude"):
+        eff = E.make_effect("coupling", form, gain=0.1)
+        sweep = _two_knob_sweep(eff)
+        model = identify(sweep, max_misfit=math.inf, refuse_unfixed=False).model
+        sw = R.prepare_sweep(sweep, model)
+        assert R.carries(eff.type, eff.spec_form, sw)
+        kn = R.refit(sw, model, eff)
+        for k, true in ((1, TRUE), (2, TRUE2)):
+            # the loop under the coupling predicts a one-knob run (the other knob at rest: no
+            # drive) far better than the loop the coupling was baked into
+            q = 40.0 * np.sin(np.linspace(0.0, 4 * math.pi, 2000))
+            want = true.forward(q)
+            err_refit = float(np.sqrt(np.mean((kn[k].forward(q) - want) ** 2)))
+            err_ident = float(np.sqrt(np.mean((model.knob(k).forward(q) - want) ** 2)))
+            assert err_refit < 0.25 * err_ident and err_refit < 0.5, (form, k, err_refit, err_ident)
+    # the signed and the dead-zone forms keep the sweep's loop; a one-knob sweep carries none
+    assert not R.carries(eff.type, eff.type.get_form("input"), sw)
+    assert not R.carries(eff.type, eff.type.get_form("deadzone-magnitude"), sw)
+    one = R.prepare_sweep(_sweep(0.0), Model({1: TRUE, 2: TRUE2}))
+    assert not R.carries(eff.type, eff.spec_form, one)

@@ -31,8 +31,9 @@ def diagnose_cmd(
     bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over runs for intervals and "
                                                        "inclusion frequencies (0: none).")] = 0,
     sweep: Annotated[Optional[Path], typer.Option(
-        "--sweep", help="The model's identification sweep (t, q<k>, y<k>): a lag, latency or creep is in it too, "
-                        "so those candidates re-identify the loop from it with the effect acting.")] = None,
+        "--sweep", help="The model's identification sweep (t, q<k>, y<k>): a lag, latency or creep is in it too "
+                        "(and a coupling when it moves both knobs), so those candidates re-identify the loop "
+                        "from it with the effect acting.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,

@@ -145,6 +145,10 @@ class Signals:
         The reported tip before the first sample (deg).
     source : str
         The run's name, for messages.
+    other_tip : numpy.ndarray or None
+        The other section's bend as the model sees it: its knob's base hysteresis (with its
+        offset) run on ``other`` (deg). Read by the couplings driven by the bend's size; None when
+        nothing reads it or the model has no such knob.
     """
 
     k: int
@@ -153,6 +157,7 @@ class Signals:
     other_offset: float = 0.0
     y0: float = 0.0
     source: str = "run"
+    other_tip: np.ndarray | None = None
 
     def need_t(self, name: str) -> np.ndarray:
         if self.t is None:
@@ -269,6 +274,11 @@ class EffectType:
 
     def cross_knob(self, eff: "Effect") -> bool:
         """Whether the stage reads the other knob (its inverse then iterates over both knobs)."""
+        return False
+
+    def reads_bend(self, eff: "Effect") -> bool:
+        """Whether the stage reads the other section's bend (:attr:`Signals.other_tip`), which the
+        chain then computes from the other knob's base model."""
         return False
 
     def acts_on(self, form: Form, curvature: float, condition: float | None, two_knobs: bool) -> bool:

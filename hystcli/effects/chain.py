@@ -74,11 +74,13 @@ class ChainState:
     """What one knob's chain carries between calls (mutable; one per knob).
 
     ``y`` is the hysteresis output y_{t-1} (None: start from the reading ``y0``); ``stages``
-    holds each effect's stage state by name, made on first use.
+    holds each effect's stage state by name, made on first use; ``other_y`` the other section's
+    bend at the last sample, where a coupling reads it (None: start from ``other_y0``).
     """
 
     y: float | None = None
     stages: dict = field(default_factory=dict)
+    other_y: float | None = None
 
     def of(self, eff: Effect) -> Any:
         s = self.stages.get(eff.name)
@@ -225,10 +227,26 @@ def step_index(plan: Plan, eff: Effect) -> int:
     return 0
 
 
+def reads_bend(plan: Plan) -> bool:
+    """Whether a stage of ``plan`` reads the other section's bend (:attr:`Signals.other_tip`)."""
+    return any(e.type.reads_bend(e) for e in plan.input + plan.edges + plan.output)
+
+
+def other_bend(plan: Plan, other_knob: KnobModel | None, other: np.ndarray | None,
+               y0: float = 0.0) -> np.ndarray | None:
+    """The other section's bend as a coupling of ``plan`` reads it: the other knob's base model
+    (with its offset) on its command ``other``, from the tip ``y0``; None when nothing reads it or
+    the other knob's model or command is missing (see :mod:`hystcli.effects.coupling`)."""
+    if other_knob is None or other is None or not reads_bend(plan):
+        return None
+    return other_knob.forward(other, y0)
+
+
 def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarray | None,
               effects: Sequence[Effect] = (), shape: Shape = Shape(), y0: float = 0.0,
               state: ChainState | None = None, condition: float | None = None,
-              other_offset: float = 0.0, source: str = "run", shape_stated: bool = False) -> KnobTrace:
+              other_offset: float = 0.0, source: str = "run", shape_stated: bool = False,
+              other_knob: KnobModel | None = None, other_y0: float = 0.0) -> KnobTrace:
     """Run knob ``k`` through every stage: the tip angle the effects make of the commands.
 
     Parameters
@@ -255,6 +273,11 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         The other knob's offset (deg): the zero of a coupling driven by its bend's size.
     shape_stated : bool
         The run states its shape (effects of the shape then read it beside a stated condition).
+    other_knob : KnobModel, optional
+        The other knob's base model with its offset: its prediction on ``q`` of the other knob
+        is the bend a coupling of the ``-magnitude`` forms reads.
+    other_y0 : float
+        The other knob's reported tip before the first sample (where its bend starts).
 
     Returns
     -------
@@ -263,7 +286,12 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
     """
     plan = Plan.of(effects)
     kn = condition_knob(knob, plan, shape, condition, shape_stated)
-    sig = Signals(k, t, q.get(3 - k), float(other_offset), float(y0), source)
+    other = q.get(3 - k)
+    start = other_y0 if state is None or state.other_y is None else state.other_y
+    bend = other_bend(plan, other_knob, other, float(start))
+    if state is not None and bend is not None and bend.size:
+        state.other_y = float(bend[-1])
+    sig = Signals(k, t, other, float(other_offset), float(y0), source, bend)
     c = run_signals(plan, kn, sig, q[k], state)
     return KnobTrace(kn, c["x"], c["free"], c["tip"], c["z"], c["yh"])
 
@@ -338,16 +366,21 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
                         f"({', '.join(f'q{k}' for k in model.knobs)})")
     t = np.ascontiguousarray(run["t"], dtype=np.float64) if "t" in run else None
     out: dict[int, np.ndarray] = {}
-    for k in knobs:
+    def first_y(k: int) -> float:
         yk = run.columns.get(f"y{k}")
-        y0 = float(yk[0]) if yk is not None and len(yk) else 0.0
+        return float(yk[0]) if yk is not None and len(yk) else 0.0
+
+    for k in knobs:
         knob = model.knob(k).with_offset(offsets[k])
         if not effs:
-            out[k] = knob.forward(q[k], y0)
+            out[k] = knob.forward(q[k], first_y(k))
         else:
-            out[k] = tip_chain(knob, k, q, t, effs, shape, y0, condition=cond,
-                               other_offset=offsets.get(3 - k, 0.0), source=run.source or "run",
-                               shape_stated="shape" in run.meta).y
+            o = 3 - k
+            other_knob = model.knob(o).with_offset(offsets[o]) if o in model.knobs and o in q else None
+            out[k] = tip_chain(knob, k, q, t, effs, shape, first_y(k), condition=cond,
+                               other_offset=offsets.get(o, 0.0), source=run.source or "run",
+                               shape_stated="shape" in run.meta, other_knob=other_knob,
+                               other_y0=first_y(o) if other_knob is not None else 0.0).y
     return out
 
 
@@ -443,8 +476,13 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
     kns = {k: condition_knob(model.knob(k).with_offset(offs[k]), plan, shape, cond, "shape" in run.meta)
            for k in use}
 
+    # the other section's bend (coupling's -magnitude forms): the other knob's base model, not
+    # conditioned, from a straight tip (where the forward chain of the commands starts it)
+    bases = {k: model.knob(k).with_offset(offs[k]) for k in use}
+
     def sig_of(k: int, other: np.ndarray | None) -> Signals:
-        return Signals(k, t, other, float(offs.get(3 - k, 0.0)), 0.0, src)
+        bend = None if other is None else other_bend(plan, bases.get(3 - k), other, 0.0)
+        return Signals(k, t, other, float(offs.get(3 - k, 0.0)), 0.0, src, bend)
 
     def run_steps(k: int, z: np.ndarray, lo: int, hi: int, other, warnings: list[str]) -> np.ndarray:
         sig = sig_of(k, other)
