@@ -40,13 +40,14 @@ Fit
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from numba import njit
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
+from ..errors import ModelError
 from ..model import KnobModel
 from .sweep import decimation_index
 
@@ -548,8 +549,56 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     with threadpool_limits(limits=1):
         stderr, tau = _stderr(th, qf, yf, resid, noise, cf)
     unident, sliding = _unidentified(th, model, qf, stderr, span, noise)
+    sliding = {**sliding, **_slides_unseen(th, qf, yf, cf, noise, set(unident) | set(sliding))}
     return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
                   theta=th, unidentified=unident, sliding=sliding, n_samples=int(qf.size), walls=tuple(walls))
+
+
+SLIDE_STEP = 0.5
+"""How far (deg) an edge is slid along its loaded line to test that the record fixes it."""
+
+SLIDE_CHI2 = 4.0
+"""The rise in the sum of squared residuals (in noise variances) below which the record cannot
+tell the slid edge from the fitted one: two standard errors."""
+
+
+def _slides_unseen(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | None, noise: float,
+                   done: set[str]) -> dict[str, str]:
+    """Dead-zone edges the record cannot place within :data:`SLIDE_STEP`.
+
+    An edge and its dead-zone height slide together along the loaded line (the line stays put,
+    only where its flat begins moves): the Jacobian at the fit sees that direction only through
+    the samples the *fitted* flat holds, and a fit that put its flat under the record's last few
+    samples (where the truth's was never reached) states a standard error of a few hundredths.
+    Sliding the edge by :data:`SLIDE_STEP` both ways and recomputing the residuals asks the
+    record itself: a rise under :data:`SLIDE_CHI2` noise variances either way leaves the edge
+    sliding (unclaimed), whatever the local curvature says.
+    """
+    out: dict[str, str] = {}
+    m = model_of(th)
+    base = float(np.sum(_residuals(th, q, y, cens) ** 2))
+    var = max(noise, 1e-12) ** 2
+    for name in ("d_pos", "d_neg"):
+        if name in done:
+            continue
+        rises = []
+        for s in (SLIDE_STEP, -SLIDE_STEP):
+            if name == "d_pos":
+                kw = dict(d_pos=m.d_pos + s, h_pos=m.h_pos + m.omega * s)
+            else:
+                kw = dict(d_neg=m.d_neg + s, h_neg=m.h_neg + m.omega * s)
+            try:
+                m2 = replace(m, **kw)
+            except ModelError:
+                continue
+            # the same first tip angle: the knob-degree start moves with the mid-height
+            th2 = theta_from_model(m2, float(th[7]) + (0.5 * (m.h_pos + m.h_neg) - 0.5 * (m2.h_pos + m2.h_neg)) / m.omega)
+            rises.append((float(np.sum(_residuals(th2, q, y, cens) ** 2)) - base) / var)
+        if rises and min(rises) < SLIDE_CHI2:
+            out[name] = (f"sliding the edge {SLIDE_STEP:g} deg along its loaded line (with its dead-zone "
+                         f"height) changes the fit by {max(min(rises), 0.0):.1f} noise variances: the record "
+                         "barely reaches the dead zone's flat there")
+    return out
 
 
 WALL_BAND = 3.0
@@ -724,10 +773,13 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         if name in out:
             continue
         m = mask & (q >= lo_) & (q <= hi_)
-        contrast = model.omega * (hi_ - lo_) * math.sqrt(m.sum()) / max(noise, 1e-12)
+        # the flat the tip actually travels: a record that only reaches a flat's end (its last
+        # samples) sees the flat part from its loaded line over that span alone
+        seen = float(np.ptp(q[m])) if m.sum() >= 2 else 0.0
+        contrast = model.omega * seen * math.sqrt(m.sum()) / max(noise, 1e-12)
         if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH:
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
-                         f"sample(s) of the fitted loop, a step of {model.omega * (hi_ - lo_):.2f} deg of tip: too little "
+                         f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the {seen:.2f} deg it travels: too little "
                          "against the tracker's noise to place the edge apart from the "
                          "dead-zone height; sweep slower or sample faster")
     # backlash: after a reversal beyond the edge plus Delta the tip leaves its plateau on the
