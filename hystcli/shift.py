@@ -98,6 +98,10 @@ it, the offset's own evidence (:data:`MAX_OFFSET_SE`) is the search's kink and p
 a sample sweep's fit on the twin states +-0.5 deg for its edges (the creep and lag of a fast
 sweep), and an offset from it is as good as that model, which the user already holds."""
 
+STEEP_AGREE = 0.5
+"""Largest disagreement (deg) between the offsets of the two contacts' steep rises out of the
+dead zone for them to be taken as the two tendons' edges (:meth:`_Search._steep_pair`)."""
+
 ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
@@ -615,6 +619,8 @@ class _Search:
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.arrival = None          # where an unloading tendon's current met the dead zone
         self.plateaus = {1: 0.0, -1: 0.0}
+        self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
+        self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
         self.model_se = {1: 0.0, -1: 0.0}   # standard errors of the model's d_pos, d_neg
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
@@ -675,8 +681,12 @@ class _Search:
             self._reverse()
 
     # -- deciding -----------------------------------------------------------------------------
-    def _judge(self, kink) -> tuple[str, str]:  # noqa: ANN001 - hystcli.current.Kink
+    def _judge(self, kink, *, min_after: int = AFTER_STEPS,  # noqa: ANN001 - hystcli.current.Kink
+               min_span: float | None = None) -> tuple[str, str]:
         """Whether a loading kink is an edge to take an offset from, or why not.
+
+        ``min_after`` readings past the kink over ``min_span`` deg (default 1.5 deg and three
+        steps) are needed before it is judged.
 
         Returns
         -------
@@ -688,7 +698,7 @@ class _Search:
         """
         n_after = kink.n_after
         span_after = self.dir * (self.seg_q[-1] - kink.at)
-        if n_after < AFTER_STEPS or span_after < max(1.5, 3 * self.u):
+        if n_after < min_after or span_after < (max(1.5, 3 * self.u) if min_span is None else min_span):
             return WAIT, ""
         noise = _reading_noise(np.array(self.seg_c))
         if kink.clarity < MIN_CLARITY:
@@ -814,6 +824,53 @@ class _Search:
                               slope=min(self.th.slope_loaded, max(kink.after, 0.0)), noise=noise)[1]
         return swing, wide, min(own, wide)
 
+    def _steep_edge(self, q: np.ndarray, c: np.ndarray, sig: float):  # noqa: ANN201 - Kink or None
+        """A contact's steep rise straight out of the dead zone, placed as a loading edge, or None.
+
+        Physics: a tendon stiffer than the sweep's (or a tip already resting on a wall when the
+        tendon is taken up) rises as steeply as a contact straight out of a flat stretch at the
+        no-load level; a wall met by a tip a taut tendon is bending comes after a loaded stretch
+        instead. The search does not drive on to lengthen the rise (it turns as for any
+        contact); the kink must pass every other check, its flat lie on its own no-load band
+        with a dead zone's slope (below eps_lower), and two readings a step or more past it
+        place it (the steep slope places it well: a contact stops the search there). Whether it is an edge is for
+        :meth:`_steep_pair`.
+        """
+        from .current import loading_edge
+
+        if self.th.current_dead_zone is None or q.size < AFTER_STEPS + 3:
+            return None
+        kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
+        if kink is None:
+            return None
+        if kink.before >= self.th.eps_lower or kink.n_after < 2:
+            return None
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        noise = _reading_noise(c)
+        _, _, band_own = self._level_bands(kink, noise)
+        if abs(kink.level - c0) > band_own:
+            return None
+        status, _ = self._judge(kink, min_after=2, min_span=self.u - 1e-9)
+        return kink if status in (ACCEPT, READY) else None
+
+    def _steep_pair(self):  # noqa: ANN201 - (direction, Kink) or None
+        """Both contacts' rises out of the dead zone, as far apart as the model's dead zone is
+        wide (within :data:`STEEP_AGREE`): the two tendons' take-up, not two walls.
+
+        A steep rise alone is not taken: the knob may meet a stop or the shaft a wall inside
+        the dead zone (paper, Discussion), and the search turns there as Algorithm 1 does. But
+        a shift moves both edges by one offset and leaves the dead zone's width as it was: two
+        walls that happened to stand exactly that width apart, each met straight out of the
+        no-load flat, are not a thing to expect, two tendons stiffer than the sweep's are.
+        Returns the better placed of the two (its direction and kink)."""
+        kp, kn = self.steep[1], self.steep[-1]
+        if kp is None or kn is None:
+            return None
+        off_p, off_n = kp.at - self.edges[1], kn.at - self.edges[-1]
+        if abs(off_p - off_n) > STEEP_AGREE:
+            return None
+        return (1, kp) if kp.se <= kn.se else (-1, kn)
+
     def _taut_without_edge(self, c: np.ndarray) -> bool:
         """Whether a search that began slack has met a taut tendon without an edge to take: the
         last :data:`AFTER_STEPS` readings all off the no-load band on the side it moves to (the
@@ -875,7 +932,13 @@ class _Search:
                 if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
                         (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper) and \
                         (c0 is None or abs(c[-1] - c0) > abs(c[-3] - c0)):
+                    sig = _reading_noise(c)
+                    self.steep[self.dir] = self._steep_edge(q, c, sig if math.isfinite(sig) and sig > 0 else 1e-9)
                     self.contacts.append(self.q)
+                    both = self._steep_pair()
+                    if both is not None:
+                        self.dir = both[0]
+                        return LOAD, both[1]
                     if len(self.contacts) > 1:
                         raise ShiftDetectionError(
                             f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
@@ -1070,6 +1133,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                      progress)
     # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
     search.plateaus = {1: km.b_neg, -1: km.b_pos}
+    search.edges = {1: km.d_pos, -1: km.d_neg}
     ident = model.identification.get(k)
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}

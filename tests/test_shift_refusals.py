@@ -257,3 +257,25 @@ def test_a_faint_edge_is_placed_within_half_a_degree_or_refused():
             assert "no edge found" in str(exc)
             continue
         assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+
+
+# --------------------------------------------------------------------------------------------
+# both tendons stiffer than the sweep's: each edge rises as steeply as a contact
+# --------------------------------------------------------------------------------------------
+def test_two_steep_rises_a_dead_zone_apart_are_the_two_edges_not_two_walls():
+    # the sweep's loaded slope 4 mA/deg (eps_upper 20), the tendons now 40 mA/deg: each edge of
+    # the dead zone [-7, 7] (the straight [-5, 9] shifted by -2) rises past eps_upper straight
+    # out of the flat no-load stretch, so the search turns at each as at a contact. A shift
+    # moves both edges by one offset and keeps the width (14 deg): two rises exactly that far
+    # apart are the two tendons taken up; two walls would not stand at the width by chance.
+    law = tendons(-7.0, 7.0, k=40.0)
+    for seed in range(6):
+        r = detect_shift(model(), Knob(law, seed=seed), 1)
+        assert len(r.contacts) == 2, seed
+        assert r.offset == pytest.approx(-2.0, abs=0.25), seed
+    # the same steep rises 10 deg apart (a dead zone 4 deg narrower than the model's): walls or
+    # stops, not the tendons of this model: no offset
+    law = tendons(-5.0, 5.0, k=40.0)
+    for seed in range(3):
+        with pytest.raises(ShiftDetectionError, match="contact in both directions"):
+            detect_shift(model(), Knob(law, seed=seed), 1)
