@@ -1139,6 +1139,19 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
     arrive = {1: None if ident is None else ident.current_arrive_rising,
               -1: None if ident is None else ident.current_arrive_falling}
+    # A tendon's current meets the no-load level where that tendon goes slack, never while it
+    # is still taut. Moving up it is the negative tendon: taut below its edge d_neg, and the tip
+    # (the model's loop) back in the dead zone only from dhat_pos on; moving down the positive
+    # one (d_pos, dhat_neg). A sweep's arrival degrees (ARRIVAL_AGREE) on the taut side of both
+    # met the no-load level while the tendon was taut and the tip still bent: something other
+    # than the tendon carried the load (a wall holding the tip), and that reference says
+    # nothing about where the tendon goes slack: no arrival is compared with it (as for a
+    # model without one).
+    dhat_pos = (km.h_pos - km.h_neg) / km.omega + km.d_neg + km.b_neg
+    dhat_neg = (km.h_neg - km.h_pos) / km.omega + km.d_pos - km.b_pos
+    slack_from = {1: min(km.d_neg, dhat_pos), -1: max(km.d_pos, dhat_neg)}
+    arrive = {d: (v if v is not None and d * (v - slack_from[d]) >= -ARRIVAL_AGREE else None)
+              for d, v in arrive.items()}
     if all(v is None for v in arrive.values()):
         search.plateaus = {1: math.inf, -1: math.inf}   # no reference: never keep an arrival
     start = search.start
