@@ -621,6 +621,7 @@ class _Search:
         self.plateaus = {1: 0.0, -1: 0.0}
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
         self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
+        self.backlash = {1: math.inf, -1: math.inf}   # the plateau of the tendon behind, by direction
         self.model_se = {1: 0.0, -1: 0.0}   # standard errors of the model's d_pos, d_neg
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
@@ -768,6 +769,27 @@ class _Search:
         if excess > 0 and self.seg_from_start and not self.start_outside and kink.after > 0:
             rn = noise if math.isfinite(noise) else self.th.noise
             plateau = max(excess - 4.0 * rn, 0.0) / kink.after
+        # A flat that sits beyond the identification's whole band on the side of the tendon
+        # behind is that tendon still taut, its tip held on the backlash plateau (a load that
+        # stays until the plateau ends, DESIGN.md section 4): the rise out of it is the tendon
+        # unloading toward the no-load level, and where it ends the other tendon may already be
+        # loading (a plateau wider than the dead zone), so the current runs on past the no-load
+        # level with no flat between: the kink is no edge. A no-load level lying off the sweep's
+        # (speed, viscous friction, a Coulomb level that changed) leaves a dead zone's flat
+        # outside the band too, so the level alone does not tell them apart; the plateau's
+        # length does: the tip rests on it for at most the model's backlash of that tendon,
+        # so only a flat from where the search began (on the plateau somewhere) that is no
+        # longer than that backlash (and a degree) can be it. As for the plateau ahead, the
+        # excess level counts in degrees of the loaded slope, past MAX_OFFSET_SE. And one tendon
+        # loading runs through the no-load level as one straight line, where an unloading that
+        # hands over to the other tendon changes slope there (two tendons, two slopes).
+        flat_span = self.dir * (kink.at - self.seg_q[0])
+        if (self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0
+                and (-lvl - band_wide) / kink.after > MAX_OFFSET_SE
+                and not self._one_line_through(kink, c0)):
+            return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
+                            f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
+                            "tendon still taut on its backlash plateau, the rise its unloading")
         placed = self._placed(kink, plateau)
         if placed is not None:
             return placed
@@ -785,6 +807,21 @@ class _Search:
         if last > band_wide + (-lvl if -lvl > band_wide else 0.0):
             return ACCEPT, ""
         return READY, ""
+
+    def _one_line_through(self, kink, c0: float) -> bool:  # noqa: ANN001
+        """Whether the readings past ``kink`` keep one slope (within a quarter) on either side of
+        where they cross the no-load level ``c0``, three readings or more on each side."""
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        past = self.dir * (q - kink.at) > 0
+        q, c = q[past], c[past]
+        beyond = self.dir * (c - c0) > 0
+        if beyond.size == 0 or not beyond[-1]:
+            return False
+        k = int(np.argmax(beyond))
+        if k < 3 or q.size - k < 3 or not beyond[k:].all():
+            return False
+        s1, s2 = _ls_slope(q[:k], c[:k]), _ls_slope(q[k:], c[k:])
+        return abs(s1 - s2) <= 0.25 * max(abs(s1), abs(s2))
 
     def _placed(self, kink, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
         """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (a
@@ -1134,6 +1171,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
     search.plateaus = {1: km.b_neg, -1: km.b_pos}
     search.edges = {1: km.d_pos, -1: km.d_neg}
+    search.backlash = {1: km.b_neg, -1: km.b_pos}
     ident = model.identification.get(k)
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}

@@ -303,3 +303,37 @@ def test_an_arrival_reference_on_the_taut_side_of_its_edge_is_not_compared_with(
     with pytest.raises(ShiftDetectionError, match="readings disagree"):
         detect_shift(model(current_arrive_rising=0.0, current_arrive_falling=9.0),
                      Knob(law, start=-5.0, seed=0), 1)
+
+
+# --------------------------------------------------------------------------------------------
+# the tendon behind still taut on its backlash plateau, its unloading handed straight over
+# --------------------------------------------------------------------------------------------
+def test_the_end_of_the_plateau_of_the_tendon_behind_is_no_edge():
+    # the dead zone [-8, 6] (the straight [-5, 9] shifted by -3); the knob rests at 0 with the
+    # positive tendon taut and the tip held on its backlash plateau (b_pos = 3): its load (25 mA)
+    # stays until -3.5, then unloads at 6 mA/deg and is gone at -7.67, where the negative tendon
+    # is already (nearly) loading at 3 mA/deg: no flat at the no-load level between. The kink
+    # at -3.5 rises (loading-positive) out of a flat, and the current runs on past the no-load
+    # level as far as that flat sat short of it; but the flat sits 19 mA off the no-load level
+    # on the taut side, no longer than the backlash, and the line changes slope where it meets
+    # the no-load level (two tendons): an offset from it (-3.5 + 5 = +1.5) would be 4.5 deg off.
+    def law(q: float, d: float) -> float:
+        pos = 25.0 if q >= -3.5 else max(25.0 - 6.0 * (-3.5 - q), 0.0)
+        return 120.0 + 6.0 * d + pos - 3.0 * max(-8.0 - q, 0.0)
+
+    for seed in range(6):
+        try:
+            r = detect_shift(model(), Knob(law, seed=seed), 1, direction=-1)
+        except ShiftDetectionError:
+            continue
+        assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+
+    # the same flat with the negative tendon taken up at -3.5 and loading at 6 mA/deg in one
+    # straight line through the no-load level (a dead zone whose no-load level lies 19 mA off
+    # the sweep's): one tendon, one slope: its edge gives the offset (-3.5 + 5 = +1.5)
+    def off_level(q: float, d: float) -> float:
+        return 120.0 + 6.0 * d + 25.0 - 6.0 * max(-3.5 - q, 0.0)
+
+    for seed in range(4):
+        r = detect_shift(model(), Knob(off_level, seed=seed), 1, direction=-1)
+        assert r.offset == pytest.approx(1.5, abs=0.25), seed
