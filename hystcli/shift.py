@@ -622,6 +622,7 @@ class _Search:
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
         self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
         self.backlash = {1: math.inf, -1: math.inf}   # the plateau of the tendon behind, by direction
+        self.unplaced = {1: None, -1: None}  # a kink at an edge the identification could not place
         self.model_se = {1: 0.0, -1: 0.0}   # standard errors of the model's d_pos, d_neg
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
@@ -739,7 +740,9 @@ class _Search:
         model_se = self.model_se.get(self.dir, 0.0)
         edge = "d_pos" if self.dir > 0 else "d_neg"
         if edge in self.th.unfixed:
-            # the search goes on: the other edge, across the dead zone, may give the offset
+            # the search goes on: the other edge, across the dead zone, may give the offset (and
+            # this kink, beside where the sweep's current put the edge, must agree with it)
+            self.unplaced[self.dir] = kink
             return REFUSE, (f"a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
                             f"place {edge} (its dead-zone flat was too narrow to see on the sweep), so that edge "
                             "gives no offset; identify on a slower sweep")
@@ -1206,6 +1209,20 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                     f"knob {k}: the readings disagree: where the unloading tendon's current met the dead zone "
                     f"({a.at:.2f} deg) gives an offset of {a.at - ref:+.2f} deg, the loading edge at "
                     f"{kink.at:.2f} deg one of {offset:+.2f} deg")
+            # An edge the identification could not place on the tip still has where the sweep's
+            # current showed it taken up (read the way the search reads it). A shift moves both
+            # edges by one offset: a search that met that edge too must find it moved by the
+            # offset it takes from this one; where it does not, the model's placed edge (or its
+            # unplaced one's current reading) is wrong, and so would the offset be.
+            other = search.unplaced.get(-d)
+            ref_other = None if ident is None else (ident.current_edge_neg if d > 0 else ident.current_edge_pos)
+            if other is not None and ref_other is not None and \
+                    abs((other.at - ref_other) - offset) > ARRIVAL_AGREE:
+                raise ShiftDetectionError(
+                    f"knob {k}: the readings disagree: the tendon taken up at {other.at:.2f} deg (where the sweep's "
+                    f"current put its edge at {ref_other:.2f} deg, an edge the identification could not place) gives "
+                    f"an offset of {other.at - ref_other:+.2f} deg, the loading edge at {kink.at:.2f} deg one of "
+                    f"{offset:+.2f} deg")
             transition = RISE
         else:  # pragma: no cover - the search returns loading edges only
             raise ShiftDetectionError(f"knob {k}: no loading edge")

@@ -337,3 +337,29 @@ def test_the_end_of_the_plateau_of_the_tendon_behind_is_no_edge():
     for seed in range(4):
         r = detect_shift(model(), Knob(off_level, seed=seed), 1, direction=-1)
         assert r.offset == pytest.approx(1.5, abs=0.25), seed
+
+
+# --------------------------------------------------------------------------------------------
+# an edge the identification could not place, met on the way, against the one it did
+# --------------------------------------------------------------------------------------------
+def test_an_unplaced_edge_met_on_the_way_must_agree_with_the_placed_one():
+    # the true dead zone [-5, 6], no shift. The identification could not place d_pos on the tip
+    # (its guess 9 is unused), but the sweep's current showed the positive tendon taken up at 6;
+    # its d_neg is -8, 3 deg off. The search takes up the positive tendon at 6 (no offset from
+    # the unplaced d_pos), crosses the dead zone and finds the negative edge at -5: an offset of
+    # -5 - (-8) = +3. A shift moves both edges alike, so the positive tendon, met at 6 where the
+    # sweep's current had it, says 0: the two disagree by 3 deg and the model's d_neg (or the
+    # current's reading) is wrong: no offset.
+    def ident_model(d_neg: float) -> Model:
+        km = KnobModel(d_pos=9.0, d_neg=d_neg, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
+        return Model({1: km}, identification={1: KnobIdentification(
+            0.5, 4.0, -40.0, 40.0, current_dead_zone=120.0, no_load_rising=126.0, no_load_falling=114.0,
+            unfixed=("d_pos",), current_edge_pos=6.0)})
+
+    law = tendons(-5.0, 6.0)
+    for seed in range(4):
+        with pytest.raises(ShiftDetectionError, match="readings disagree"):
+            detect_shift(ident_model(-8.0), Knob(law, seed=seed), 1)
+        # with d_neg where the tendon is, the two agree and the offset (0) stands
+        r = detect_shift(ident_model(-5.0), Knob(law, seed=seed), 1)
+        assert r.edge == "neg" and r.offset == pytest.approx(0.0, abs=0.25), seed
