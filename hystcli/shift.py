@@ -98,6 +98,10 @@ it, the offset's own evidence (:data:`MAX_OFFSET_SE`) is the search's kink and p
 a sample sweep's fit on the twin states +-0.5 deg for its edges (the creep and lag of a fast
 sweep), and an offset from it is as good as that model, which the user already holds."""
 
+STEEP_AGREE = 0.5
+"""Largest disagreement (deg) between the offsets of the two contacts' steep rises out of the
+dead zone for them to be taken as the two tendons' edges (:meth:`_Search._steep_pair`)."""
+
 ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
@@ -615,6 +619,10 @@ class _Search:
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.arrival = None          # where an unloading tendon's current met the dead zone
         self.plateaus = {1: 0.0, -1: 0.0}
+        self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
+        self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
+        self.backlash = {1: math.inf, -1: math.inf}   # the plateau of the tendon behind, by direction
+        self.unplaced = {1: None, -1: None}  # a kink at an edge the identification could not place
         self.model_se = {1: 0.0, -1: 0.0}   # standard errors of the model's d_pos, d_neg
         self.moving = bool(getattr(probe, "reads_moving", False))
         self.trace: list[tuple[float, float, float]] = []
@@ -675,8 +683,12 @@ class _Search:
             self._reverse()
 
     # -- deciding -----------------------------------------------------------------------------
-    def _judge(self, kink) -> tuple[str, str]:  # noqa: ANN001 - hystcli.current.Kink
+    def _judge(self, kink, *, min_after: int = AFTER_STEPS,  # noqa: ANN001 - hystcli.current.Kink
+               min_span: float | None = None) -> tuple[str, str]:
         """Whether a loading kink is an edge to take an offset from, or why not.
+
+        ``min_after`` readings past the kink over ``min_span`` deg (default 1.5 deg and three
+        steps) are needed before it is judged.
 
         Returns
         -------
@@ -688,7 +700,7 @@ class _Search:
         """
         n_after = kink.n_after
         span_after = self.dir * (self.seg_q[-1] - kink.at)
-        if n_after < AFTER_STEPS or span_after < max(1.5, 3 * self.u):
+        if n_after < min_after or span_after < (max(1.5, 3 * self.u) if min_span is None else min_span):
             return WAIT, ""
         noise = _reading_noise(np.array(self.seg_c))
         if kink.clarity < MIN_CLARITY:
@@ -728,7 +740,9 @@ class _Search:
         model_se = self.model_se.get(self.dir, 0.0)
         edge = "d_pos" if self.dir > 0 else "d_neg"
         if edge in self.th.unfixed:
-            # the search goes on: the other edge, across the dead zone, may give the offset
+            # the search goes on: the other edge, across the dead zone, may give the offset (and
+            # this kink, beside where the sweep's current put the edge, must agree with it)
+            self.unplaced[self.dir] = kink
             return REFUSE, (f"a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
                             f"place {edge} (its dead-zone flat was too narrow to see on the sweep), so that edge "
                             "gives no offset; identify on a slower sweep")
@@ -758,6 +772,27 @@ class _Search:
         if excess > 0 and self.seg_from_start and not self.start_outside and kink.after > 0:
             rn = noise if math.isfinite(noise) else self.th.noise
             plateau = max(excess - 4.0 * rn, 0.0) / kink.after
+        # A flat that sits beyond the identification's whole band on the side of the tendon
+        # behind is that tendon still taut, its tip held on the backlash plateau (a load that
+        # stays until the plateau ends, DESIGN.md section 4): the rise out of it is the tendon
+        # unloading toward the no-load level, and where it ends the other tendon may already be
+        # loading (a plateau wider than the dead zone), so the current runs on past the no-load
+        # level with no flat between: the kink is no edge. A no-load level lying off the sweep's
+        # (speed, viscous friction, a Coulomb level that changed) leaves a dead zone's flat
+        # outside the band too, so the level alone does not tell them apart; the plateau's
+        # length does: the tip rests on it for at most the model's backlash of that tendon,
+        # so only a flat from where the search began (on the plateau somewhere) that is no
+        # longer than that backlash (and a degree) can be it. As for the plateau ahead, the
+        # excess level counts in degrees of the loaded slope, past MAX_OFFSET_SE. And one tendon
+        # loading runs through the no-load level as one straight line, where an unloading that
+        # hands over to the other tendon changes slope there (two tendons, two slopes).
+        flat_span = self.dir * (kink.at - self.seg_q[0])
+        if (self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0
+                and (-lvl - band_wide) / kink.after > MAX_OFFSET_SE
+                and not self._one_line_through(kink, c0)):
+            return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
+                            f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
+                            "tendon still taut on its backlash plateau, the rise its unloading")
         placed = self._placed(kink, plateau)
         if placed is not None:
             return placed
@@ -775,6 +810,21 @@ class _Search:
         if last > band_wide + (-lvl if -lvl > band_wide else 0.0):
             return ACCEPT, ""
         return READY, ""
+
+    def _one_line_through(self, kink, c0: float) -> bool:  # noqa: ANN001
+        """Whether the readings past ``kink`` keep one slope (within a quarter) on either side of
+        where they cross the no-load level ``c0``, three readings or more on each side."""
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        past = self.dir * (q - kink.at) > 0
+        q, c = q[past], c[past]
+        beyond = self.dir * (c - c0) > 0
+        if beyond.size == 0 or not beyond[-1]:
+            return False
+        k = int(np.argmax(beyond))
+        if k < 3 or q.size - k < 3 or not beyond[k:].all():
+            return False
+        s1, s2 = _ls_slope(q[:k], c[:k]), _ls_slope(q[k:], c[k:])
+        return abs(s1 - s2) <= 0.25 * max(abs(s1), abs(s2))
 
     def _placed(self, kink, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
         """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (a
@@ -813,6 +863,53 @@ class _Search:
         own = self.th.no_load(self.dir, self.moving, swing=swing,
                               slope=min(self.th.slope_loaded, max(kink.after, 0.0)), noise=noise)[1]
         return swing, wide, min(own, wide)
+
+    def _steep_edge(self, q: np.ndarray, c: np.ndarray, sig: float):  # noqa: ANN201 - Kink or None
+        """A contact's steep rise straight out of the dead zone, placed as a loading edge, or None.
+
+        Physics: a tendon stiffer than the sweep's (or a tip already resting on a wall when the
+        tendon is taken up) rises as steeply as a contact straight out of a flat stretch at the
+        no-load level; a wall met by a tip a taut tendon is bending comes after a loaded stretch
+        instead. The search does not drive on to lengthen the rise (it turns as for any
+        contact); the kink must pass every other check, its flat lie on its own no-load band
+        with a dead zone's slope (below eps_lower), and two readings a step or more past it
+        place it (the steep slope places it well: a contact stops the search there). Whether it is an edge is for
+        :meth:`_steep_pair`.
+        """
+        from .current import loading_edge
+
+        if self.th.current_dead_zone is None or q.size < AFTER_STEPS + 3:
+            return None
+        kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
+        if kink is None:
+            return None
+        if kink.before >= self.th.eps_lower or kink.n_after < 2:
+            return None
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        noise = _reading_noise(c)
+        _, _, band_own = self._level_bands(kink, noise)
+        if abs(kink.level - c0) > band_own:
+            return None
+        status, _ = self._judge(kink, min_after=2, min_span=self.u - 1e-9)
+        return kink if status in (ACCEPT, READY) else None
+
+    def _steep_pair(self):  # noqa: ANN201 - (direction, Kink) or None
+        """Both contacts' rises out of the dead zone, as far apart as the model's dead zone is
+        wide (within :data:`STEEP_AGREE`): the two tendons' take-up, not two walls.
+
+        A steep rise alone is not taken: the knob may meet a stop or the shaft a wall inside
+        the dead zone (paper, Discussion), and the search turns there as Algorithm 1 does. But
+        a shift moves both edges by one offset and leaves the dead zone's width as it was: two
+        walls that happened to stand exactly that width apart, each met straight out of the
+        no-load flat, are not a thing to expect, two tendons stiffer than the sweep's are.
+        Returns the better placed of the two (its direction and kink)."""
+        kp, kn = self.steep[1], self.steep[-1]
+        if kp is None or kn is None:
+            return None
+        off_p, off_n = kp.at - self.edges[1], kn.at - self.edges[-1]
+        if abs(off_p - off_n) > STEEP_AGREE:
+            return None
+        return (1, kp) if kp.se <= kn.se else (-1, kn)
 
     def _taut_without_edge(self, c: np.ndarray) -> bool:
         """Whether a search that began slack has met a taut tendon without an edge to take: the
@@ -875,7 +972,13 @@ class _Search:
                 if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
                         (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper) and \
                         (c0 is None or abs(c[-1] - c0) > abs(c[-3] - c0)):
+                    sig = _reading_noise(c)
+                    self.steep[self.dir] = self._steep_edge(q, c, sig if math.isfinite(sig) and sig > 0 else 1e-9)
                     self.contacts.append(self.q)
+                    both = self._steep_pair()
+                    if both is not None:
+                        self.dir = both[0]
+                        return LOAD, both[1]
                     if len(self.contacts) > 1:
                         raise ShiftDetectionError(
                             f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
@@ -1070,11 +1173,26 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                      progress)
     # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
     search.plateaus = {1: km.b_neg, -1: km.b_pos}
+    search.edges = {1: km.d_pos, -1: km.d_neg}
+    search.backlash = {1: km.b_neg, -1: km.b_pos}
     ident = model.identification.get(k)
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
     arrive = {1: None if ident is None else ident.current_arrive_rising,
               -1: None if ident is None else ident.current_arrive_falling}
+    # A tendon's current meets the no-load level where that tendon goes slack, never while it
+    # is still taut. Moving up it is the negative tendon: taut below its edge d_neg, and the tip
+    # (the model's loop) back in the dead zone only from dhat_pos on; moving down the positive
+    # one (d_pos, dhat_neg). A sweep's arrival degrees (ARRIVAL_AGREE) on the taut side of both
+    # met the no-load level while the tendon was taut and the tip still bent: something other
+    # than the tendon carried the load (a wall holding the tip), and that reference says
+    # nothing about where the tendon goes slack: no arrival is compared with it (as for a
+    # model without one).
+    dhat_pos = (km.h_pos - km.h_neg) / km.omega + km.d_neg + km.b_neg
+    dhat_neg = (km.h_neg - km.h_pos) / km.omega + km.d_pos - km.b_pos
+    slack_from = {1: min(km.d_neg, dhat_pos), -1: max(km.d_pos, dhat_neg)}
+    arrive = {d: (v if v is not None and d * (v - slack_from[d]) >= -ARRIVAL_AGREE else None)
+              for d, v in arrive.items()}
     if all(v is None for v in arrive.values()):
         search.plateaus = {1: math.inf, -1: math.inf}   # no reference: never keep an arrival
     start = search.start
@@ -1091,6 +1209,20 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                     f"knob {k}: the readings disagree: where the unloading tendon's current met the dead zone "
                     f"({a.at:.2f} deg) gives an offset of {a.at - ref:+.2f} deg, the loading edge at "
                     f"{kink.at:.2f} deg one of {offset:+.2f} deg")
+            # An edge the identification could not place on the tip still has where the sweep's
+            # current showed it taken up (read the way the search reads it). A shift moves both
+            # edges by one offset: a search that met that edge too must find it moved by the
+            # offset it takes from this one; where it does not, the model's placed edge (or its
+            # unplaced one's current reading) is wrong, and so would the offset be.
+            other = search.unplaced.get(-d)
+            ref_other = None if ident is None else (ident.current_edge_neg if d > 0 else ident.current_edge_pos)
+            if other is not None and ref_other is not None and \
+                    abs((other.at - ref_other) - offset) > ARRIVAL_AGREE:
+                raise ShiftDetectionError(
+                    f"knob {k}: the readings disagree: the tendon taken up at {other.at:.2f} deg (where the sweep's "
+                    f"current put its edge at {ref_other:.2f} deg, an edge the identification could not place) gives "
+                    f"an offset of {other.at - ref_other:+.2f} deg, the loading edge at {kink.at:.2f} deg one of "
+                    f"{offset:+.2f} deg")
             transition = RISE
         else:  # pragma: no cover - the search returns loading edges only
             raise ShiftDetectionError(f"knob {k}: no loading edge")

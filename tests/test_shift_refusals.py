@@ -257,3 +257,109 @@ def test_a_faint_edge_is_placed_within_half_a_degree_or_refused():
             assert "no edge found" in str(exc)
             continue
         assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+
+
+# --------------------------------------------------------------------------------------------
+# both tendons stiffer than the sweep's: each edge rises as steeply as a contact
+# --------------------------------------------------------------------------------------------
+def test_two_steep_rises_a_dead_zone_apart_are_the_two_edges_not_two_walls():
+    # the sweep's loaded slope 4 mA/deg (eps_upper 20), the tendons now 40 mA/deg: each edge of
+    # the dead zone [-7, 7] (the straight [-5, 9] shifted by -2) rises past eps_upper straight
+    # out of the flat no-load stretch, so the search turns at each as at a contact. A shift
+    # moves both edges by one offset and keeps the width (14 deg): two rises exactly that far
+    # apart are the two tendons taken up; two walls would not stand at the width by chance.
+    law = tendons(-7.0, 7.0, k=40.0)
+    for seed in range(6):
+        r = detect_shift(model(), Knob(law, seed=seed), 1)
+        assert len(r.contacts) == 2, seed
+        assert r.offset == pytest.approx(-2.0, abs=0.25), seed
+    # the same steep rises 10 deg apart (a dead zone 4 deg narrower than the model's): walls or
+    # stops, not the tendons of this model: no offset
+    law = tendons(-5.0, 5.0, k=40.0)
+    for seed in range(3):
+        with pytest.raises(ShiftDetectionError, match="contact in both directions"):
+            detect_shift(model(), Knob(law, seed=seed), 1)
+
+
+# --------------------------------------------------------------------------------------------
+# a sweep's arrival reference that no tendon going slack could have made
+# --------------------------------------------------------------------------------------------
+def test_an_arrival_reference_on_the_taut_side_of_its_edge_is_not_compared_with():
+    # the dead zone [2, 16] (the straight [-5, 9] shifted by +7), the knob resting at -5 with
+    # the negative tendon taut: moving up, its current unloads (4 mA/deg) and meets the no-load
+    # level at 2, the edge; the positive tendon is taken up at 16. The model's sweep put the
+    # rising arrival at -30, 25 deg below d_neg = -5 and the loop's dhat_pos (-4.76), where the
+    # negative tendon is taut and the tip bent: a wall held the load there, not the tendon. An
+    # offset from it (2 - (-30) = 32) says nothing; the loading edge's (+7) stands.
+    law = tendons(2.0, 16.0)
+    walled = model(current_arrive_rising=-30.0, current_arrive_falling=9.0)
+    for seed in range(4):
+        r = detect_shift(walled, Knob(law, start=-5.0, seed=seed), 1)
+        assert r.start_outside and r.edge == "pos", seed
+        assert r.offset == pytest.approx(7.0, abs=0.25), seed
+    # a reference where a tendon can go slack is still compared with: 0 (5 deg into the
+    # straight dead zone, as a load-following current would arrive) puts the offset at 2 - 0,
+    # 5 deg from the loading edge's: the readings disagree
+    with pytest.raises(ShiftDetectionError, match="readings disagree"):
+        detect_shift(model(current_arrive_rising=0.0, current_arrive_falling=9.0),
+                     Knob(law, start=-5.0, seed=0), 1)
+
+
+# --------------------------------------------------------------------------------------------
+# the tendon behind still taut on its backlash plateau, its unloading handed straight over
+# --------------------------------------------------------------------------------------------
+def test_the_end_of_the_plateau_of_the_tendon_behind_is_no_edge():
+    # the dead zone [-8, 6] (the straight [-5, 9] shifted by -3); the knob rests at 0 with the
+    # positive tendon taut and the tip held on its backlash plateau (b_pos = 3): its load (25 mA)
+    # stays until -3.5, then unloads at 6 mA/deg and is gone at -7.67, where the negative tendon
+    # is already (nearly) loading at 3 mA/deg: no flat at the no-load level between. The kink
+    # at -3.5 rises (loading-positive) out of a flat, and the current runs on past the no-load
+    # level as far as that flat sat short of it; but the flat sits 19 mA off the no-load level
+    # on the taut side, no longer than the backlash, and the line changes slope where it meets
+    # the no-load level (two tendons): an offset from it (-3.5 + 5 = +1.5) would be 4.5 deg off.
+    def law(q: float, d: float) -> float:
+        pos = 25.0 if q >= -3.5 else max(25.0 - 6.0 * (-3.5 - q), 0.0)
+        return 120.0 + 6.0 * d + pos - 3.0 * max(-8.0 - q, 0.0)
+
+    for seed in range(6):
+        try:
+            r = detect_shift(model(), Knob(law, seed=seed), 1, direction=-1)
+        except ShiftDetectionError:
+            continue
+        assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+
+    # the same flat with the negative tendon taken up at -3.5 and loading at 6 mA/deg in one
+    # straight line through the no-load level (a dead zone whose no-load level lies 19 mA off
+    # the sweep's): one tendon, one slope: its edge gives the offset (-3.5 + 5 = +1.5)
+    def off_level(q: float, d: float) -> float:
+        return 120.0 + 6.0 * d + 25.0 - 6.0 * max(-3.5 - q, 0.0)
+
+    for seed in range(4):
+        r = detect_shift(model(), Knob(off_level, seed=seed), 1, direction=-1)
+        assert r.offset == pytest.approx(1.5, abs=0.25), seed
+
+
+# --------------------------------------------------------------------------------------------
+# an edge the identification could not place, met on the way, against the one it did
+# --------------------------------------------------------------------------------------------
+def test_an_unplaced_edge_met_on_the_way_must_agree_with_the_placed_one():
+    # the true dead zone [-5, 6], no shift. The identification could not place d_pos on the tip
+    # (its guess 9 is unused), but the sweep's current showed the positive tendon taken up at 6;
+    # its d_neg is -8, 3 deg off. The search takes up the positive tendon at 6 (no offset from
+    # the unplaced d_pos), crosses the dead zone and finds the negative edge at -5: an offset of
+    # -5 - (-8) = +3. A shift moves both edges alike, so the positive tendon, met at 6 where the
+    # sweep's current had it, says 0: the two disagree by 3 deg and the model's d_neg (or the
+    # current's reading) is wrong: no offset.
+    def ident_model(d_neg: float) -> Model:
+        km = KnobModel(d_pos=9.0, d_neg=d_neg, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
+        return Model({1: km}, identification={1: KnobIdentification(
+            0.5, 4.0, -40.0, 40.0, current_dead_zone=120.0, no_load_rising=126.0, no_load_falling=114.0,
+            unfixed=("d_pos",), current_edge_pos=6.0)})
+
+    law = tendons(-5.0, 6.0)
+    for seed in range(4):
+        with pytest.raises(ShiftDetectionError, match="readings disagree"):
+            detect_shift(ident_model(-8.0), Knob(law, seed=seed), 1)
+        # with d_neg where the tendon is, the two agree and the offset (0) stands
+        r = detect_shift(ident_model(-5.0), Knob(law, seed=seed), 1)
+        assert r.edge == "neg" and r.offset == pytest.approx(0.0, abs=0.25), seed
