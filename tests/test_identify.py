@@ -518,3 +518,16 @@ def test_an_edge_the_record_cannot_place_within_half_a_degree_is_not_claimed():
     assert "d_neg" not in fit.stderr
     assert any("d_neg is not fixed by this record (sliding the edge" in w for w in fit.warnings)
     assert abs(fit.model.d_pos - case.truth.d_pos) <= 0.5 and "d_pos" in fit.stderr
+
+
+def test_current_only_judges_a_wall_against_the_loaded_slope_of_the_reversal_stretches():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent wall plant (design seed 1732): the record's first stretch took the wall's own
+    # steep rise for its edge, so the wall's steep fall after the next reversal did not look
+    # elastic against it and was read as the sheath friction flipping: b_pos 8.3 deg too wide
+    # (found on held-out seed 400166, checked on this design seed)
+    case = plants.sweep_case(1732, tip=False)
+    with pytest.raises(IdentificationError, match="the current cannot fix"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)

@@ -296,6 +296,8 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     # from it, on the loaded side)
     lv = [s.edge.level for s in stretches if s.edge is not None and s.from_reversal]
     c0 = float(np.median(lv)) if lv else math.nan
+    loaded_from_reversal = [s.loaded_slope for s in stretches if s.from_reversal and s.loaded_slope is not None]
+    loaded_ref = float(np.median(loaded_from_reversal)) if loaded_from_reversal else math.nan
     for side, d in (("pos", +1), ("neg", -1)):
         # stretches that came through the whole dead zone from a reversal first: the record's
         # first stretch starts wherever the knob rested
@@ -339,8 +341,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             if s.direction != -d or s.plateau is None:
                 return False
             prev = stretches[i - 1] if i > 0 else None
-            elastic = (prev is not None and prev.end_slope is not None and prev.loaded_slope is not None
-                       and d * prev.end_slope >= ELASTIC_TOP * max(prev.loaded_slope, 1e-12))
+            # against the loaded slope the stretches from a reversal read at their edges (the
+            # record's first stretch may have taken the wall's own steep rise for its edge)
+            ref = loaded_ref if math.isfinite(loaded_ref) else (prev.loaded_slope if prev is not None else None)
+            elastic = (prev is not None and prev.end_slope is not None and ref is not None
+                       and d * prev.end_slope >= ELASTIC_TOP * max(ref, 1e-12))
             return s.plateau_held or not elastic
 
         pl = [s.plateau for i, s in enumerate(stretches[:-1]) if shown(i, s)]
