@@ -1188,9 +1188,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     # than the tendon carried the load (a wall holding the tip), and that reference says
     # nothing about where the tendon goes slack: no arrival is compared with it (as for a
     # model without one).
-    dhat_pos = (km.h_pos - km.h_neg) / km.omega + km.d_neg + km.b_neg
-    dhat_neg = (km.h_neg - km.h_pos) / km.omega + km.d_pos - km.b_pos
-    slack_from = {1: min(km.d_neg, dhat_pos), -1: max(km.d_pos, dhat_neg)}
+    slack_from = {1: min(km.d_neg, km.dhat_pos), -1: max(km.d_pos, km.dhat_neg)}
     arrive = {d: (v if v is not None and d * (v - slack_from[d]) >= -ARRIVAL_AGREE else None)
               for d, v in arrive.items()}
     if all(v is None for v in arrive.values()):

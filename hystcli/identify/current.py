@@ -193,7 +193,7 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     # drop at that reversal, spread backward by a zero-phase filter, would take one of the pieces
     # the plateau, the unloading, the dead zone and the loading need
     head = tt <= tt[-1] - GUARD_S if stop < q.size - 1 else np.ones(tt.size, bool)
-    xp, vp = _bins(x[head], cc[head], width) if head.sum() >= 12 else (xa, va)
+    xp, vp = _bins(x[head], cc[head], width) if 12 <= head.sum() < head.size else (xa, va)
     if from_reversal and xp.size >= 10:
         pa = pieces(xp, vp, minlen)
         sa = [d * m for (_, _, m, _) in pa]

@@ -74,8 +74,9 @@ step for backlash width, and leaves the edge on a flat a few hundredths of a deg
 
 FLAT_CONTRAST = 4.0
 """How clearly a dead-zone flat must stand apart from the loaded lines either side of it:
-``omega * width * sqrt(samples on it) >= FLAT_CONTRAST * noise`` (the step between the two
-lines, averaged over the samples that see it, in units of the tip's noise)."""
+``omega * seen * sqrt(samples on it) >= FLAT_CONTRAST * noise``, ``seen`` the knob span the tip
+travels on the flat (the step between the flat and its loaded line over that span, averaged over
+the samples that see it, in units of the tip's noise)."""
 
 # theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
 _LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
@@ -403,13 +404,22 @@ def _residual_jacobian(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censo
 
 
 def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float, loss: str = "soft_l1",
-            cens: Censor | None = None):
-    inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
-    th0 = np.minimum(np.maximum(np.asarray(th0, float), _LO + inner), _HI - inner)
-    span = float(np.ptp(q)) or 1.0
+            cens: Censor | None = None, bounds: tuple[np.ndarray, np.ndarray] | None = None,
+            span: float | None = None):
+    """Trust-region least squares from ``th0``: within the valid box (started just inside it), or
+    within ``bounds`` (some unknowns pinned); ``span`` (deg) scales the knob-angle unknowns
+    (default the ``q`` given)."""
+    if bounds is None:
+        inner = np.where(np.isfinite(_HI), 1e-7, 0.0)
+        lo, hi = _LO, _HI
+        th0 = np.minimum(np.maximum(np.asarray(th0, float), _LO + inner), _HI - inner)
+    else:
+        lo, hi = bounds
+        th0 = np.minimum(np.maximum(np.asarray(th0, float), lo), hi)
+    span = (float(np.ptp(q)) or 1.0) if span is None else span
     x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1,
                         max(1.0, f_scale), 0.05 * span])
-    return least_squares(_residuals, th0, jac=_residual_jacobian, bounds=(_LO, _HI), args=(q, y, cens),
+    return least_squares(_residuals, th0, jac=_residual_jacobian, bounds=(lo, hi), args=(q, y, cens),
                          loss=loss, f_scale=f_scale, x_scale=x_scale, max_nfev=400)
 
 
@@ -694,12 +704,9 @@ def refit_with_edge(fit: TipFit, q: np.ndarray, y: np.ndarray, name: str, at: fl
     pin = (0,) if name == "d_neg" else (0, 1)
     for i in pin:
         lo[i], hi[i] = th[i] - 1e-9 * max(1.0, abs(th[i])), th[i] + 1e-9 * max(1.0, abs(th[i]))
-    th = np.minimum(np.maximum(th, lo), hi)
-    span = float(np.ptp(q)) or 1.0
-    x_scale = np.array([0.05 * span, 0.05 * span, 0.05, 0.05, 0.05 * span, 0.1, max(1.0, f_scale), 0.05 * span])
     with threadpool_limits(limits=1):
-        res = least_squares(_residuals, th, jac=_residual_jacobian, bounds=(lo, hi), args=(qf, yf, cf),
-                            loss="soft_l1", f_scale=f_scale, x_scale=x_scale, max_nfev=400)
+        # the span of the whole record, as the fit's own last refinement saw it
+        res = _refine(th, qf, yf, f_scale, cens=cf, bounds=(lo, hi), span=float(np.ptp(q)) or 1.0)
     rms = lambda t: float(np.sqrt(np.mean(_residuals(t, qf, yf, cf) ** 2)))  # noqa: E731
     return model_of(res.x), rms(res.x), rms(fit.theta)
 
