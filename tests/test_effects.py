@@ -283,6 +283,29 @@ def test_saturation_stiffens_near_the_largest_bend():
     assert np.allclose(sat[small], base[small], atol=2e-3)  # near straight, barely changed
 
 
+def test_saturation_knobs_forms_give_each_knob_its_own_limit():
+    t, r = twin.periodic(fs=100.0)
+    q = {1: r, 2: 0.9 * r}
+    base = _sim((), q, t)
+    hard = _sim((E.make_effect("saturation", "hard-knobs", limit=50.0, knob2=0.6),), q, t)
+    # knob 1 stops at +-50, knob 2 at +-0.6 * 50 = +-30 (hand-computed limits)
+    assert np.max(np.abs(hard["y1"])) == pytest.approx(min(50.0, np.max(np.abs(base["y1"]))))
+    assert np.max(np.abs(hard["y2"])) == pytest.approx(30.0)
+    assert np.max(np.abs(base["y2"])) > 30.0
+    # knob2 = 1 is the one-limit form, sample for sample
+    one = _sim((E.make_effect("saturation", "smooth", limit=50.0),), q, t)
+    both = _sim((E.make_effect("saturation", "smooth-knobs", limit=50.0, knob2=1.0),), q, t)
+    for k in (1, 2):
+        assert np.array_equal(one[f"y{k}"], both[f"y{k}"])
+    # the inverse undoes it on each knob
+    eff = E.make_effect("saturation", "smooth-knobs", limit=60.0, knob2=0.7)
+    m = Model(CAT.knobs, CAT.geometry, effects=(eff.spec(),))
+    comp = m.compensate(Run({"t": t, "r1": 0.5 * r, "r2": 0.3 * r}))
+    sim = _sim((eff,), {1: comp.run["q1"], 2: comp.run["q2"]}, t)
+    for k, scale in ((1, 0.5), (2, 0.3)):
+        assert np.max(np.abs(sim[f"y{k}"] - scale * r)) < 0.05
+
+
 def test_contact_stops_the_tip_and_the_current_climbs_far_above_the_loaded_slope():
     t = np.arange(3001) / 100.0
     q = 2.0 * t  # 0 -> 60 deg, slowly

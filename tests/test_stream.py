@@ -29,6 +29,8 @@ FORMS = [(n, f.name) for n, et in E.EFFECTS.items() for f in et.forms]
 # limits the 60 deg periodic reference passes, so the clipping path runs too)
 ON = {("saturation", "smooth"): {"limit": 80.0}, ("saturation", "hard"): {"limit": 50.0},
       ("saturation", "asymmetric"): {"limit": 90.0, "ratio": 1.5}, ("contact", "wall"): {"wall": 40.0},
+      ("saturation", "smooth-knobs"): {"limit": 80.0, "knob2": 0.8},
+      ("saturation", "hard-knobs"): {"limit": 50.0, "knob2": 1.3},
       ("stretch", "stiffening"): {"compliance": 3.0, "reference": 10.0, "stiffening": 1.0},
       ("friction", "capstan"): {"mu": 0.2}, ("friction", "backlash"): {"mu": 0.2}, ("friction", "slope"): {"mu": 0.2},
       ("deadzone", "width"): {"width": 2.0}, ("deadzone", "centre"): {"shift": 1.5}}

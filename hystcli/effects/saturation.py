@@ -9,7 +9,15 @@ smooth      limit * tanh(y_h / limit)                                   limit = 
 hard        y_h clipped to [-limit, limit] (a mechanical stop)          limit = inf
 asymmetric  limit * tanh(y_h / limit) for y_h >= 0, and                 limit = inf
             ratio*limit * tanh(y_h / (ratio*limit)) below
+smooth-     smooth, with knob 2's section flattening towards            limit = inf
+knobs       +-knob2*limit (each knob bends its own section or plane)
+hard-knobs  hard, knob 2's section stopping at +-knob2*limit             limit = inf
 ==========  =========================================================  =========================
+
+The ``-knobs`` forms exist because the two knobs of a 2-DoF catheter bend different sections (or
+the same section in two planes, with different tendon moment arms and wall stiffness): nothing
+makes their largest bends equal, and one limit shared by both knobs must compromise between them,
+where a one-sided ``contact`` wall fits one of them exactly and wins.
 
 Compensation inverts the map; targets beyond 99.9 % of a smooth limit (or beyond a hard one)
 cannot be reached and are clipped there, with a warning.
@@ -26,14 +34,22 @@ _INF = math.inf
 _LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 20), [math.inf]])
 
 
-def _form(name: str, summary: str, **extra) -> Form:
+def _form(name: str, summary: str, second: str | None = None) -> Form:
+    """A saturation form; ``second`` names a ratio parameter (the negative side's limit for
+    ``asymmetric``, knob 2's for the ``-knobs`` forms)."""
     params, units = ("limit",), ("deg",)
     typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": _LIMITS}
-    if extra:
-        params, units = params + ("ratio",), units + ("1",)
-        typical, bounds, domain = {**typical, "ratio": 1.0}, {**bounds, "ratio": (0.25, 4.0)}, {**domain, "ratio": (1e-3, 1e3)}
-        axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 10), [math.inf]]),
-                "ratio": np.geomspace(0.4, 2.5, 5)}
+    if second:
+        params, units = params + (second,), units + ("1",)
+        typical, bounds, domain = ({**typical, second: 1.0}, {**bounds, second: (0.25, 4.0)},
+                                   {**domain, second: (1e-3, 1e3)})
+        if second == "ratio":
+            axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 10), [math.inf]]),
+                    second: np.geomspace(0.4, 2.5, 5)}
+        else:
+            # a hard stop is seen to within the grid step on every clipped sample: the knobs'
+            # limits need the one-limit forms' step (17 %), their ratio a step of about 12 %
+            axes = {"limit": _LIMITS, second: np.geomspace(0.5, 2.0, 13)}
     return Form(name, "output", 0, params, units, "limit", _INF, typical, bounds, domain, axes, summary)
 
 
@@ -45,25 +61,36 @@ class Saturation(EffectType):
     forms = (
         _form("smooth", "the tip flattens smoothly towards +-limit"),
         _form("hard", "the tip stops at +-limit"),
-        _form("asymmetric", "the tip flattens towards +limit and -ratio*limit", ratio=True),
+        _form("asymmetric", "the tip flattens towards +limit and -ratio*limit", "ratio"),
+        _form("smooth-knobs", "each knob's section flattens towards its own limit (knob 2: knob2*limit)", "knob2"),
+        _form("hard-knobs", "each knob's section stops at its own limit (knob 2: knob2*limit)", "knob2"),
     )
 
     @staticmethod
-    def _limits(eff) -> tuple[float, float]:
+    def _limits(eff, k: int) -> tuple[float, float]:
+        """The positive and negative limits on knob ``k``."""
         lim = eff["limit"]
-        return lim, (lim * eff["ratio"] if eff.form == "asymmetric" else lim)
+        if eff.form == "asymmetric":
+            return lim, lim * eff["ratio"]
+        if eff.form.endswith("-knobs") and k == 2:
+            lim = lim * eff["knob2"]
+        return lim, lim
+
+    @staticmethod
+    def _hard(eff) -> bool:
+        return eff.form.startswith("hard")
 
     def forward(self, eff, z, sig, state):
-        lim, neg = self._limits(eff)
-        if eff.form == "hard":
+        lim, neg = self._limits(eff, sig.k)
+        if self._hard(eff):
             return np.clip(z, -lim, lim)
         if eff.form == "asymmetric":
             return np.where(z >= 0.0, lim * np.tanh(z / lim), neg * np.tanh(z / neg))
         return lim * np.tanh(z / lim)
 
     def at_rest(self, eff, y, sig):
-        lim, neg = self._limits(eff)
-        if eff.form == "hard":
+        lim, neg = self._limits(eff, sig.k)
+        if self._hard(eff):
             return min(max(y, -lim), lim)
         if eff.form == "asymmetric" and y < 0.0:
             lim = neg
@@ -71,9 +98,9 @@ class Saturation(EffectType):
         return lim * math.atanh(max(-1 + 1e-12, min(1 - 1e-12, y / lim)))
 
     def inverse(self, eff, z, sig, state, warnings, options):
-        lim, neg = self._limits(eff)
         k = sig.k
-        if eff.form == "hard":
+        lim, neg = self._limits(eff, k)
+        if self._hard(eff):
             if np.any(np.abs(z) > lim):
                 warnings.append(f"knob {k}: the reference passes the saturation limit {lim:g} deg: clipped there")
             return np.clip(z, -lim, lim)
@@ -91,7 +118,7 @@ class Saturation(EffectType):
         """The inverse static map, one sample at a time (warns once, as :meth:`inverse`)."""
         from .kernels import StatelessStep
 
-        lim, neg = self._limits(eff)
+        lim, neg = self._limits(eff, k)
         said = []
 
         def say(text):
@@ -99,7 +126,7 @@ class Saturation(EffectType):
                 said.append(True)
                 warnings.append(text)
 
-        if eff.form == "hard":
+        if self._hard(eff):
             def inv(z, other):
                 if z > lim or z < -lim:
                     say(f"knob {k}: the reference passes the saturation limit {lim:g} deg: clipped there")
