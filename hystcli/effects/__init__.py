@@ -14,7 +14,8 @@ stretch     a stated load stretches the cable: the output moves     linear, stif
 coupling    the other knob moves this knob's loop                    input, output, deadzone
                                                                      (each also -magnitude)
 rate        viscous lag of the tip behind the knob                   input, input2, output, output2
-saturation  the bending section stiffens near its largest bend       smooth, hard, asymmetric
+saturation  the bending section stiffens near its largest bend       smooth, hard, asymmetric,
+                                                                     smooth-knobs, hard-knobs
 creep       slow relaxation: a fraction of each move arrives late    relax
 contact     the tip meets a wall                                     wall
 latency     the tracker reports the tip late                         tracker
