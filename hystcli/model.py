@@ -405,6 +405,13 @@ class Shape:
         """:math:`\\sum_i |\\alpha_i|` in degrees (drives the ``friction`` effect)."""
         return float(sum(abs(s.alpha) for s in self.segments))
 
+    def projected(self, k: int) -> float:
+        """The bend projected on knob ``k``'s bending plane, deg (signed): :math:`\\sum_i \\alpha_i
+        \\cos\\theta_i` for knob 1, :math:`\\sum_i \\alpha_i \\sin\\theta_i` for knob 2, the sums
+        of paper eqs. 3 and 4 (drives the ``deadzone`` forms that follow the bend's side)."""
+        trig = math.cos if k == 1 else math.sin
+        return float(sum(s.alpha * trig(math.radians(s.theta)) for s in self.segments))
+
     def rotated(self, delta_deg: float) -> "Shape":
         """The shape seen after a bulk rotation of the catheter body by ``delta_deg``."""
         return Shape(tuple(Segment(s.alpha, s.theta - delta_deg) for s in self.segments))

@@ -230,7 +230,7 @@ def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict,
     for k, kn in p.knobs.items():
         sig = sigs[k]
         if eff.spec_form.stage == "condition":
-            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
+            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
             c = E.run_signals(plan, knc, sig, p.q[k], steps=steps)
         else:
             key = (eff.form, k)
@@ -239,7 +239,7 @@ def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict,
                 if type(eff.type).at_rest is not EffectType.at_rest:
                     # its static map sets the hysteresis' start: reuse only what comes before it
                     j = min(j, [s for s, _ in steps].index("hyst"))
-                knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated)
+                knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
                 cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j, steps=steps))
             j, knc, carry = cuts[key]
             c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry, steps=steps)

@@ -529,7 +529,7 @@ class Compensator:
     def _refresh(self) -> None:
         # the knob parameters under the shape/condition with the offsets now
         for k, ch in self._chains.items():
-            kn = chain.condition_knob(self._model.knob(k), self._plan, self.shape, self.condition)
+            kn = chain.condition_knob(self._model.knob(k), self._plan, self.shape, self.condition, k=k)
             ch.hyst.set_knob(kn)
             # this knob's bend (what the other knob's magnitude coupling reads): its base model,
             # not conditioned, with its offset now (chain.inverse's `bases`)

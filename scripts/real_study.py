@@ -270,7 +270,7 @@ def valid_at(model: Model, runs) -> bool:
     for r in runs:
         try:
             E.condition_knob(model.knob(1), E.as_effects(model.effects), Shape.parse(r.meta.get("shape")),
-                             E.run_condition(r.meta), "shape" in r.meta)
+                             E.run_condition(r.meta), "shape" in r.meta, 1)
         except ModelError:
             return False
     return True

@@ -200,6 +200,31 @@ def test_deadzone_widens_the_dead_zone_with_curvature():
     assert narrow - base == pytest.approx(-2.0 * math.pi / 2, abs=0.08)
 
 
+def test_deadzone_bend_forms_follow_the_side_the_shaft_bends_to():
+    # Shape.projected by hand: 60 cos 0 + 30 cos 180 = 30 on knob 1; 60 sin 0 + 30 sin 180 = 0 on knob 2
+    shape = Shape.parse("alpha=60,theta=0;alpha=30,theta=180")
+    assert shape.projected(1) == pytest.approx(30.0) and shape.projected(2) == pytest.approx(0.0, abs=1e-12)
+    one = (E.make_effect("deadzone", "one-edge", side=4.0),)
+    rad60 = math.radians(60.0)
+    out = E.condition_knob(K1, one, Shape.parse("alpha=60,theta=0"), k=1)
+    assert out.d_pos == pytest.approx(K1.d_pos + 4.0 * rad60) and out.d_neg == K1.d_neg
+    out = E.condition_knob(K1, one, Shape.parse("alpha=60,theta=180"), k=1)
+    assert out.d_neg == pytest.approx(K1.d_neg - 4.0 * rad60) and out.d_pos == K1.d_pos
+    # the same bend on knob 2's plane: knob 2 sees it, knob 1 barely (cos 90 deg)
+    out = E.condition_knob(K1, one, Shape.parse("alpha=60,theta=90"), k=2)
+    assert out.d_pos == pytest.approx(K1.d_pos + 4.0 * rad60)
+    assert E.condition_knob(K1, one, Shape.parse("alpha=60,theta=90"), k=1).d_pos == pytest.approx(K1.d_pos)
+    # centre-bend: both edges move with the signed bend
+    cb = (E.make_effect("deadzone", "centre-bend", shift=2.0),)
+    for theta, sign in ((0, 1.0), (180, -1.0)):
+        out = E.condition_knob(K1, cb, Shape.parse(f"alpha=60,theta={theta}"), k=1)
+        assert out.d_pos - K1.d_pos == pytest.approx(sign * 2.0 * rad60)
+        assert out.d_neg - K1.d_neg == pytest.approx(sign * 2.0 * rad60)
+    # a stated load without a shape has no side: the base knob itself
+    assert E.condition_knob(K1, one, Shape(), 40.0, k=1) is K1
+    assert E.condition_knob(K1, cb, Shape(), 40.0, k=1) is K1
+
+
 def _rising_edge(q, y, h):
     # knob angle where the ascending tip leaves the dead-zone height h (the shifted d_pos)
     i = np.flatnonzero((np.gradient(q) > 0) & (y > h + 1e-9) & (np.abs(q) < 30))

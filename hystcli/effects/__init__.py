@@ -9,7 +9,8 @@ them; :mod:`.chain` runs a model's effects in fixed stages, forward and inverse.
 name        physics                                                 forms (first: the default)
 ==========  =====================================================  ===============================
 friction    capstan friction grows with the total curvature         capstan, backlash, slope
-deadzone    the shape changes the dead zone                          width, centre
+deadzone    the shape changes the dead zone                          width, centre, one-edge,
+                                                                     centre-bend
 stretch     a stated load stretches the cable: the output moves     linear, stiffening, slack
 coupling    the other knob moves this knob's loop                    input, output, deadzone
                                                                      (each also -magnitude)

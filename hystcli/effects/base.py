@@ -241,9 +241,11 @@ class EffectType:
         return f"<effect type {self.name}: {', '.join(f.name for f in self.forms)}>"
 
     # -- stages (override what the forms use) ---------------------------------------------------
-    def condition(self, eff: "Effect", p: dict[str, float], cond_deg: float) -> bool:
+    def condition(self, eff: "Effect", p: dict[str, float], cond_deg: float, bend_deg: float = 0.0) -> bool:
         """Edit the knob parameters ``p`` in place for the run's condition (deg of curvature, or
-        the run's stated ``condition``); True when something changed."""
+        the run's stated ``condition``); True when something changed. ``bend_deg`` is the bend
+        projected on this knob's plane (:meth:`hystcli.model.Shape.projected`; 0 without a shape
+        or a knob), for forms that depend on which side the shaft bends to."""
         raise NotImplementedError
 
     def forward(self, eff: "Effect", z: np.ndarray, sig: Signals, state: Any) -> np.ndarray:

@@ -132,14 +132,15 @@ def driver_value(e: Effect, shape: Shape, condition: float | None, shape_stated:
 
 
 def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
-                   condition: float | None = None, shape_stated: bool = False) -> KnobModel:
+                   condition: float | None = None, shape_stated: bool = False, k: int | None = None) -> KnobModel:
     """The knob's parameters under the run's condition (stage ``condition``).
 
     The driver is the shape's total curvature (deg), or ``condition`` (deg) when the run states
     one: other cable-driven data state their own condition (a resistive load) in the run's
     ``condition`` metadata, scaled to degrees of curvature-equivalent (:func:`driver_value`: an
-    effect of the shape reads the curvature when the run states its shape). Returns ``knob``
-    itself (the same object) when no effect changes anything.
+    effect of the shape reads the curvature when the run states its shape). ``k`` (the knob) gives
+    the effects the bend projected on its plane (:meth:`Shape.projected`); without it that bend
+    reads 0. Returns ``knob`` itself (the same object) when no effect changes anything.
 
     Raises
     ------
@@ -151,7 +152,8 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
     if not conds:
         return knob
     p = knob.params()
-    changed = [e.name for e in conds if e.type.condition(e, p, driver_value(e, shape, condition, shape_stated))]
+    bend = shape.projected(k) if k is not None else 0.0
+    changed = [e.name for e in conds if e.type.condition(e, p, driver_value(e, shape, condition, shape_stated), bend)]
     if not changed:
         return knob
     try:
@@ -285,7 +287,7 @@ def tip_chain(knob: KnobModel, k: int, q: Mapping[int, np.ndarray], t: np.ndarra
         With no effect switched on, ``trace.y`` is exactly ``knob.forward(q[k], y0)``.
     """
     plan = Plan.of(effects)
-    kn = condition_knob(knob, plan, shape, condition, shape_stated)
+    kn = condition_knob(knob, plan, shape, condition, shape_stated, k)
     other = q.get(3 - k)
     start = other_y0 if state is None or state.other_y is None else state.other_y
     bend = other_bend(plan, other_knob, other, float(start))
@@ -473,7 +475,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
     steps = _reverse_steps(plan)
     two = len(use) == 2
     cut = next((i for i, (kind, e) in enumerate(steps) if two and _needs_other(kind, e, plan)), len(steps))
-    kns = {k: condition_knob(model.knob(k).with_offset(offs[k]), plan, shape, cond, "shape" in run.meta)
+    kns = {k: condition_knob(model.knob(k).with_offset(offs[k]), plan, shape, cond, "shape" in run.meta, k)
            for k in use}
 
     # the other section's bend (coupling's -magnitude forms): the other knob's base model, not

@@ -41,7 +41,7 @@ class Friction(EffectType):
         Form("slope", "condition", 10, summary="slope / g: the tip follows less of each knob degree", **_MU),
     )
 
-    def condition(self, eff, p, cond_deg):
+    def condition(self, eff, p, cond_deg, bend_deg=0.0):
         kappa = math.radians(cond_deg)
         if kappa == 0.0:
             return False

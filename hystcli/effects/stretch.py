@@ -61,7 +61,7 @@ class Stretch(EffectType):
              "the dead zone widens by compliance per rad of condition above the reference (stretched tendons)"),
     )
 
-    def condition(self, eff, p, cond_deg):
+    def condition(self, eff, p, cond_deg, bend_deg=0.0):
         if eff.form == "slack":
             half = 0.5 * eff["compliance"] * math.radians(cond_deg - eff["reference"])
             if half == 0.0:
