@@ -524,7 +524,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
         sig = sig_of(k, other)
         for kind, e in steps[lo:hi]:
             if kind == "hyst":
-                z = _hysteresis_inverse(kns[k], z, plan, sig)
+                z = _hysteresis_inverse(kns[k], z, plan, sig, opts["max_lead"], warnings)
             else:
                 z = e.type.inverse(e, z, sig, e.type.new_inverse_state(e), warnings, opts)
         return z
@@ -587,7 +587,8 @@ def _commands_run(run, t, q: Mapping[int, np.ndarray]):
     return Run(cols, meta, run.source)
 
 
-def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals) -> np.ndarray:
+def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals, max_lead: float = 30.0,
+                        warnings: list[str] | None = None) -> np.ndarray:
     dp = dn = None
     widen = 0.0
     for e in plan.edges:
@@ -603,9 +604,18 @@ def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals) 
         return kn.inverse(r, y0=yh0)
     t = np.ascontiguousarray(sig.need_t("rate"), dtype=np.float64) if widen != 0.0 else _NONE
     out = np.empty_like(r)
-    kernels.inverse_edges_kernel(np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
-                                 _NONE if dp is None else np.ascontiguousarray(dp, dtype=np.float64),
-                                 _NONE if dn is None else np.ascontiguousarray(dn, dtype=np.float64),
-                                 _NONE, _NONE, float(widen), t, kernels.new_speed_state(),
-                                 yh0, kn.holding_knob_angle(yh0), out)
+    _, limited = kernels.inverse_edges_kernel(
+        np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
+        _NONE if dp is None else np.ascontiguousarray(dp, dtype=np.float64),
+        _NONE if dn is None else np.ascontiguousarray(dn, dtype=np.float64),
+        _NONE, _NONE, float(widen), float(max_lead), t, kernels.new_speed_state(), yh0, kn.holding_knob_angle(yh0), out)
+    if limited and warnings is not None:
+        warnings.append(_lead_warning(sig.k, widen, max_lead))
     return out
+
+
+def _lead_warning(k: int, widen: float, max_lead: float) -> str:
+    """What the inverse says when a speed-widened backlash needed a command step beyond ``max_lead``."""
+    return (f"knob {k}: the viscous backlash (c_visc {widen:g} s) needed command steps beyond max_lead "
+            f"{max_lead:g} deg (the command's own speed widens the backlash it crosses): the commands "
+            "miss the reference there")

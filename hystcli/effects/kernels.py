@@ -186,16 +186,29 @@ def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
 
 @njit(cache=True, fastmath=False)
 def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, ep, en,
-                         widen, t, sst, y0, x0, out):
+                         widen, lead, t, sst, y0, x0, out):
     """Exact inverse of :func:`forward_edges_kernel` (the moving-edge form of the model's inverse).
 
     ``dp``, ``dn``, ``ep``, ``en`` as there (empty: none). ``widen`` (s) adds a backlash that grows
     with the speed of the command this kernel writes: both plateau ends move apart by
     ``widen * |v|``, ``v`` the knob-speed estimate (:func:`knob_speed_kernel`, state ``sst``,
     times ``t``) *up to the previous sample*. Being one sample behind, the move is known before
-    ``x_i`` is solved for, so the solve stays explicit and exact; :func:`forward_edges_kernel` with
-    ``ep = widen * |v_{i-1}|``, ``en = -ep`` gives ``r`` back. ``widen == 0``: ``t`` and ``sst`` are
-    not read.
+    ``x_i`` is solved for, so the solve stays explicit and exact: :func:`forward_edges_kernel` with
+    ``ep = widen * |v_{i-1}|``, ``en = -ep`` gives ``r`` back, for ``widen <= SPEED_TAU``.
+
+    Beyond that the command's own speed feeds back: a step of the command reads as speed, which
+    widens the backlash, which asks for a further step, ``widen / SPEED_TAU`` times the last: for a
+    ratio above 1 an exact inverse is unstable (it rings into any limit). The inverse then reads its
+    speed through a slower filter, :func:`inverse_speed_tau` (``2 * widen``: a loop gain of about 1/2), so
+    it is stable but approximate where the speed changes (after a reversal, for about that time);
+    at a steady speed both read the same speed and the command is exact again.
+
+    A plateau end moved past its dead-zone edge (``dhat_pos + ... > d_pos``: the dead zone used
+    up) leaves the envelope continuous and monotone with slope ``2 omega`` between the two (both
+    tendons act at once, :func:`forward_edges_kernel`'s sum); its inverse there is the middle case
+    below. Returns the hysteresis output at the end and the number of samples where a widened
+    command's step was limited to ``lead`` deg (0: exact everywhere; module :mod:`.rate` notes).
+    ``widen == 0``: ``t``, ``sst`` and ``lead`` are not read.
     """
     moved = dp.shape[0] > 0
     apart = ep.shape[0] > 0
@@ -204,8 +217,10 @@ def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
     a = 0.0
     b = 0.0
     v = 0.0
+    limited = 0
+    tau = inverse_speed_tau(widen)
     if widen != 0.0 and not math.isnan(sst[0]):
-        v = (sst[2] - sst[0]) / SPEED_TAU  # the speed after the last sample of an earlier call
+        v = (sst[2] - sst[0]) / tau  # the speed after the last sample of an earlier call
     for i in range(r.shape[0]):
         ri = r[i]
         if moved:
@@ -219,21 +234,55 @@ def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
             g = widen * abs(v)
             far_pos = far_pos + g
             far_neg = far_neg - g
+        xp = x
+        yp = y
         if ri > y:
-            if ri > h_pos:
-                x = d_pos + b + (ri - h_pos) / omega + offset
+            near = d_pos + b
+            if far_pos > near and h_pos + omega * (near - far_pos) < ri <= h_pos + omega * (far_pos - near):
+                x = 0.5 * (far_pos + near + (ri - h_pos) / omega) + offset
+            elif ri > h_pos:
+                x = near + (ri - h_pos) / omega + offset
             else:
                 x = far_pos + (ri - h_pos) / omega + offset
             y = ri
         elif ri < y:
-            if ri < h_neg:
-                x = d_neg + a + (ri - h_neg) / omega + offset
+            near = d_neg + a
+            if far_neg < near and h_neg + omega * (far_neg - near) <= ri < h_neg + omega * (near - far_neg):
+                x = 0.5 * (far_neg + near + (ri - h_neg) / omega) + offset
+            elif ri < h_neg:
+                x = near + (ri - h_neg) / omega + offset
             else:
                 x = far_neg + (ri - h_neg) / omega + offset
             y = ri
-        out[i] = x
         if widen != 0.0:
-            v = _speed_step(x, t[i], sst, SPEED_TAU)
+            if x > xp + lead or x < xp - lead:
+                # a step beyond the lead limit: the command's own speed widens the backlash it
+                # must cross (rate notes); take the limited step and the output it reaches
+                x = xp + lead if x > xp else xp - lead
+                limited += 1
+                y = _forward_one(x - offset, yp, d_pos, d_neg, far_pos, far_neg, b, a, omega, h_pos, h_neg)
+            v = _speed_step(x, t[i], sst, tau)
+        out[i] = x
+    return y, limited
+
+
+@njit(cache=True, fastmath=False)
+def inverse_speed_tau(widen):
+    """Time constant (s) of the speed estimate :func:`inverse_edges_kernel` reads for a backlash
+    widening ``widen`` (s): :data:`SPEED_TAU` (the forward's, exact) up to ``widen = SPEED_TAU``,
+    ``2 * widen`` beyond (a stable loop; its notes)."""
+    return SPEED_TAU if widen <= SPEED_TAU else 2.0 * widen
+
+
+@njit(cache=True, fastmath=False)
+def _forward_one(u, y, d_pos, d_neg, far_pos, far_neg, b, a, omega, h_pos, h_neg):
+    # one sample of forward_edges_kernel with the far edges already moved
+    lo = h_pos + omega * (min(u - far_pos, 0.0) + max(u - d_pos - b, 0.0))
+    hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(u - far_neg, 0.0))
+    if y < lo:
+        y = lo
+    if y > hi:
+        y = hi
     return y
 
 
