@@ -803,8 +803,8 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
 
 
 def _loops(model: Model, sweep: Run):
-    """The per-grid-point loops of :func:`_select` (``loops``): for a family whose every form is a
-    time-dependent effect the straight sweep carries (:func:`hystcli.refit.applies`), and for a
+    """The per-grid-point loops of :func:`_select` (``loops``): for the forms of a time-dependent
+    effect the straight sweep carries (:func:`hystcli.refit.applies`), and for a
     bend-driven coupling's input and output forms when the sweep moves both knobs
     (:func:`hystcli.refit.carries`), the knob models re-identified from the sweep with each grid
     point's effect acting."""
@@ -817,13 +817,10 @@ def _loops(model: Model, sweep: Run):
     def loops(etype: EffectType, grid) -> list | None:
         if etype.name in done:
             return done[etype.name]
-        # a time-dependent family whose every form the sweep carries, or a coupling when the sweep
-        # moves both knobs (its other forms keep the model's loop)
-        if etype.driver in R.DRIVERS:
-            if not all(R.carries(etype, f, sw) for f in etype.forms):
-                done[etype.name] = None
-                return None
-        elif not any(R.carries(etype, f, sw) for f in etype.forms):
+        # a time-dependent family, or a coupling when the sweep moves both knobs: the forms the
+        # sweep carries get their loops, the others keep the model's (rate's viscous backlash
+        # moves the loop's plateau ends, which the refinement cannot take)
+        if not any(R.carries(etype, f, sw) for f in etype.forms):
             done[etype.name] = None
             return None
         out, prev = [None] * len(grid), {}

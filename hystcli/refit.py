@@ -97,12 +97,44 @@ COUPLED_STAGES = ("input", "output")
 
 def carries(etype, form, sweep: Sweep) -> bool:
     """Whether the sweep carries this form of an effect in a way :func:`refit` can take off it:
-    a time-dependent effect always, a bend-driven coupling of the input or output when both knobs
-    move (module notes)."""
+    a time-dependent effect always (a speed-widened backlash too: :func:`unwiden`), a bend-driven
+    coupling of the input or output when both knobs move (module notes)."""
     if etype.driver in DRIVERS:
-        return form.stage in STAGES
+        return form.stage in STAGES or (form.stage == "edges" and etype.driver == "speed")
     return (etype.driver == "other knob" and len(sweep.q) == 2 and form.stage in COUPLED_STAGES
             and form.name.endswith("-magnitude"))
+
+
+WIDENING_SPEED = 0.5
+"""The sweep's knob speed that widened the backlash it identified: the median of the speed
+estimate over the samples moving at least this fraction of the sweep's fastest (the plateaus are
+crossed just after a reversal, once the estimate has come back up to the sweep's speed)."""
+
+
+def unwiden(sweep: Sweep, model: Model, widen: float) -> dict[int, KnobModel]:
+    """The loops under a backlash that widens by ``widen * |knob speed|`` (s): each knob's
+    identified backlash widths less ``widen`` times the speed the sweep crossed its plateaus at.
+
+    A sweep identifies the plateaus as long as the speed made them (``b + widen * v``), so the
+    hypothesis is tried on the loop it implies; a widening the sweep cannot have held (a width
+    below zero) leaves a zero width. Closed form, not a refinement: the widening moves only the
+    plateau ends, which the identification read directly.
+    """
+    from .effects import kernels
+
+    out = {k: model.knob(k) for k in model.knobs}
+    for k, q in sweep.q.items():
+        v = np.empty_like(q)
+        kernels.knob_speed_kernel(q, sweep.t, kernels.SPEED_TAU, kernels.new_speed_state(), v)
+        v = np.abs(v)
+        fast = v >= WIDENING_SPEED * float(np.max(v)) if v.size else v > 0
+        speed = float(np.median(v[fast])) if np.any(fast) else 0.0
+        m = out[k]
+        cut = widen * speed
+        p = m.params()
+        p["b_pos"], p["b_neg"] = max(m.b_pos - cut, 0.0), max(m.b_neg - cut, 0.0)
+        out[k] = KnobModel(**p)
+    return out
 
 
 MAX_NFEV = 30
@@ -126,6 +158,8 @@ def refit(sweep: Sweep, model: Model, eff: Effect, starts: Mapping[int, KnobMode
     model's). ``starts``: where each knob's refinement starts (default: the model's own loop);
     ``cache``: refits by the input they saw (an output lag and an input lag of one time constant
     give the sweep the same input, and are refitted once)."""
+    if eff.spec_form.stage == "edges":
+        return unwiden(sweep, model, eff.type.widening(eff))
     out = {k: model.knob(k) for k in model.knobs}
     cross = eff.type.cross_knob(eff) and len(sweep.q) == 2
     for k, q in sweep.q.items():

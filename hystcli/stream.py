@@ -45,7 +45,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .effects import chain
+from .effects import chain, kernels
 from .effects.base import Effect, Signals
 from .effects.registry import as_effects
 from .errors import DataError, ModelError
@@ -60,12 +60,21 @@ class _Hysteresis:
     ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
 
     __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
-                 "y", "x", "fresh", "y0", "edges", "outputs", "k")
+                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "widen", "sz", "stp", "sx", "lead", "warnings", "tau")
 
-    def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect]) -> None:
+    def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect],
+                 widen: float = 0.0, lead: float = 30.0, warnings: list[str] | None = None) -> None:
         self.k = k
         self.edges = tuple(edges)          # coupling that moves the dead zone (reads the other knob)
         self.outputs = tuple(outputs)      # output stages: where the hysteresis starts behind a reading
+        # a backlash that widens with the knob's speed (rate form backlash): the plateau ends move
+        # apart by widen*|v|, v the speed estimate of the commands up to the previous sample
+        # (kernels.inverse_edges_kernel; its lag state [z, t, x] is sz, stp, sx here)
+        self.widen = float(widen)
+        w = self.widen
+        self.tau = kernels.SPEED_TAU if w <= kernels.SPEED_TAU else 2.0 * w   # kernels.inverse_speed_tau
+        self.lead = float(lead)
+        self.warnings = warnings
         self.y0 = 0.0
         self.set_knob(kn)
         self.reset(0.0)
@@ -79,6 +88,7 @@ class _Hysteresis:
         self.fresh = True
         self.y0 = float(y0)
         self.y = self.x = 0.0
+        self.sz = self.stp = self.sx = math.nan   # the speed estimate at rest
 
     def _start(self, other: float | None) -> None:
         # the hysteresis state behind the tip reading y0 at rest, as the batch inverse starts it
@@ -97,6 +107,8 @@ class _Hysteresis:
             self._start(other)
         y = self.y
         if r == y:
+            if self.widen != 0.0:
+                self._speed(self.x, t)
             return self.x
         # the dead-zone edges as the other knob moves them this sample (coupling)
         b = a = 0.0
@@ -105,30 +117,74 @@ class _Hysteresis:
                 dp, dn = e.type.edges_at(e, other)
                 b += dp
                 a += dn
+        far_pos = self.dhat_pos + a
+        far_neg = self.dhat_neg + b
+        if self.widen != 0.0:
+            v = 0.0 if math.isnan(self.sz) else (self.sx - self.sz) / self.tau
+            g = self.widen * abs(v)
+            far_pos = far_pos + g
+            far_neg = far_neg - g
+        xp = self.x
         if r > y:
-            if r > self.h_pos:
-                self.x = self.d_pos + b + (r - self.h_pos) / self.omega + self.offset
+            near = self.d_pos + b
+            h = self.h_pos
+            if far_pos > near and h + self.omega * (near - far_pos) < r <= h + self.omega * (far_pos - near):
+                self.x = 0.5 * (far_pos + near + (r - h) / self.omega) + self.offset
+            elif r > h:
+                self.x = near + (r - h) / self.omega + self.offset
             else:
-                self.x = self.dhat_pos + a + (r - self.h_pos) / self.omega + self.offset
+                self.x = far_pos + (r - h) / self.omega + self.offset
             self.y = r
         elif r < y:
-            if r < self.h_neg:
-                self.x = self.d_neg + a + (r - self.h_neg) / self.omega + self.offset
+            near = self.d_neg + a
+            h = self.h_neg
+            if far_neg < near and h + self.omega * (far_neg - near) <= r < h + self.omega * (near - far_neg):
+                self.x = 0.5 * (far_neg + near + (r - h) / self.omega) + self.offset
+            elif r < h:
+                self.x = near + (r - h) / self.omega + self.offset
             else:
-                self.x = self.dhat_neg + b + (r - self.h_neg) / self.omega + self.offset
+                self.x = far_neg + (r - h) / self.omega + self.offset
             self.y = r
+        if self.widen != 0.0:
+            x = self.x
+            if x > xp + self.lead or x < xp - self.lead:
+                # kernels.inverse_edges_kernel's lead limit, the same operations
+                x = self.x = xp + self.lead if x > xp else xp - self.lead
+                u = x - self.offset
+                lo = self.h_pos + self.omega * (min(u - far_pos, 0.0) + max(u - self.d_pos - b, 0.0))
+                hi = self.h_neg + self.omega * (min(u - self.d_neg - a, 0.0) + max(u - far_neg, 0.0))
+                y = lo if y < lo else y
+                y = hi if y > hi else y
+                self.y = y
+                if self.warnings is not None:
+                    self.warnings.append(chain._lead_warning(self.k, self.widen, self.lead))
+            self._speed(self.x, t)
         return self.x
 
+    def _speed(self, x: float, t: float) -> None:
+        # kernels._speed_step in plain floats (the same operations)
+        if math.isnan(self.sz):
+            self.sz, self.stp, self.sx = x, t, x
+            return
+        dt = t - self.stp
+        if dt > 0.0:
+            tau = self.tau
+            e = math.exp(-dt / tau)
+            lag = tau * (x - self.sx) / dt
+            self.sz = x - lag + e * (self.sz - self.sx + lag)
+        self.stp = t
+        self.sx = x
+
     def save(self) -> tuple:
-        return (self.fresh, self.y, self.x)
+        return (self.fresh, self.y, self.x, self.sz, self.stp, self.sx)
 
     def load(self, s: tuple) -> None:
-        self.fresh, self.y, self.x = s
+        self.fresh, self.y, self.x, self.sz, self.stp, self.sx = s
 
     @property
     def plain(self) -> bool:
         """True when the compiled kernel of :mod:`hystcli.model` gives this stage's numbers."""
-        return not self.edges
+        return not self.edges and self.widen == 0.0
 
 
 class _Bend:
@@ -215,6 +271,9 @@ class _CompiledCoupling:
         # Python on the first sample, exact only when no output stage reads the other knob there
         if any(e.type.cross_knob(e) for e in plan.output) and any(
                 s is c.hyst for c in (c1, c2) for s in c.tail):
+            return None
+        # a backlash widened by the knob's speed has no op (its speed state): the Python passes
+        if any(c.hyst.widen != 0.0 and c.hyst in c.tail for c in (c1, c2)):
             return None
         table: list = []
         rng = []
@@ -408,7 +467,8 @@ class Compensator:
         self._chains: dict[int, _Knob] = {}
         for k in self._knobs:
             hyst = _Hysteresis(model.knob(k), k, [e for e in self._plan.edges if e.type.cross_knob(e)],
-                               self._plan.output)
+                               self._plan.output, sum(e.type.widening(e) for e in self._plan.edges),
+                               opts["max_lead"], self._warnings)
             made = []
             for kind, e in kept:
                 if kind == "hyst":

@@ -261,6 +261,12 @@ class EffectType:
         """Per-sample moves ``(dp, dn)`` of the dead-zone edges d_pos, d_neg (edges stage)."""
         raise NotImplementedError
 
+    def widening(self, eff: "Effect") -> float:
+        """Growth of both backlash widths with knob speed (s; edges stage): the plateau ends
+        ``dhat_pos``/``dhat_neg`` move apart from ``d_pos``/``d_neg`` by ``widening * |v|``, v the
+        knob-speed estimate of :data:`hystcli.effects.kernels.SPEED_TAU` (0: none)."""
+        return 0.0
+
     def at_rest(self, eff: "Effect", y: float, sig: Signals) -> float:
         """The input of an output stage that holds its output at ``y`` at rest (the hysteresis
         state behind a reading); the identity unless the stage bends the static map."""

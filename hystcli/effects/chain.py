@@ -75,12 +75,15 @@ class ChainState:
 
     ``y`` is the hysteresis output y_{t-1} (None: start from the reading ``y0``); ``stages``
     holds each effect's stage state by name, made on first use; ``other_y`` the other section's
-    bend at the last sample, where a coupling reads it (None: start from ``other_y0``).
+    bend at the last sample, where a coupling reads it (None: start from ``other_y0``); ``speed``
+    the knob-speed estimate's state (:func:`kernels.knob_speed_kernel`) where a backlash widens
+    with speed (None: at rest).
     """
 
     y: float | None = None
     stages: dict = field(default_factory=dict)
     other_y: float | None = None
+    speed: np.ndarray | None = None
 
     def of(self, eff: Effect) -> Any:
         s = self.stages.get(eff.name)
@@ -163,13 +166,43 @@ def condition_knob(knob: KnobModel, effects: Sequence[Effect], shape: Shape,
         raise ModelError(f"effect {'+'.join(changed)} at total curvature {kdeg:g} deg: {exc}") from None
 
 
-def _hysteresis(kn: KnobModel, x: np.ndarray, yh0: float, dp, dn) -> np.ndarray:
-    if dp is None:
+_NONE = np.empty(0)
+"""An empty move array: the edges kernels' "no such move"."""
+
+
+def _speed_moves(x: np.ndarray, t: np.ndarray, widen: float, st: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    # the plateau ends' moves of a speed-widened backlash: +-widen*|v| of the knob-speed estimate
+    # up to the previous sample (kernels.inverse_edges_kernel's rule, so its inverse is exact)
+    v0 = 0.0 if math.isnan(st[0]) else (st[2] - st[0]) / kernels.SPEED_TAU
+    v = np.empty_like(x)
+    kernels.knob_speed_kernel(x, t, kernels.SPEED_TAU, st, v)
+    ep = np.empty_like(x)
+    if x.size:
+        ep[0] = widen * abs(v0)
+        np.multiply(widen, np.abs(v[:-1]), out=ep[1:])
+    return ep, -ep
+
+
+def _hysteresis(kn: KnobModel, x: np.ndarray, yh0: float, dp, dn, widen: float = 0.0,
+                sig: Signals | None = None, state: ChainState | None = None) -> np.ndarray:
+    if dp is None and widen == 0.0:
         return kn.forward(x, yh0)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    ep = en = _NONE
+    if widen != 0.0:
+        t = np.ascontiguousarray(sig.need_t("rate"), dtype=np.float64)
+        if state is not None:
+            if state.speed is None:
+                state.speed = kernels.new_speed_state()
+            st = state.speed
+        else:
+            st = kernels.new_speed_state()
+        ep, en = _speed_moves(x, t, widen, st)
     out = np.empty_like(x)
-    kernels.forward_edges_kernel(np.ascontiguousarray(x, dtype=np.float64), *kn._kernel_args(),
-                                 np.ascontiguousarray(dp, dtype=np.float64),
-                                 np.ascontiguousarray(dn, dtype=np.float64), float(yh0), out)
+    kernels.forward_edges_kernel(x, *kn._kernel_args(),
+                                 _NONE if dp is None else np.ascontiguousarray(dp, dtype=np.float64),
+                                 _NONE if dn is None else np.ascontiguousarray(dn, dtype=np.float64),
+                                 ep, en, float(yh0), out)
     return out
 
 
@@ -185,14 +218,16 @@ def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: C
                 steps: list | None = None) -> dict:
     """Run the signal steps of ``plan`` (:meth:`Plan.signal_steps`) from step ``start`` (with the
     ``carry`` an earlier call stopped with) up to ``stop``; returns the carry: ``z`` (the signal),
-    ``x``, ``yh``, ``free``, ``tip`` and the edge moves ``dp``, ``dn``.
+    ``x``, ``yh``, ``free``, ``tip``, the edge moves ``dp``, ``dn`` and the backlash's speed
+    widening ``w`` (s: both plateau ends move apart by ``w * |knob speed|``).
 
     Stopping before a step and starting there again is how the diagnosis reuses everything a
     candidate effect cannot change; ``steps`` is ``plan.signal_steps()`` when the caller has it.
     """
     if steps is None:
         steps = plan.signal_steps()
-    c = {"z": x, "x": x, "dp": None, "dn": None, "yh": None, "free": None, "tip": None} if carry is None else dict(carry)
+    c = ({"z": x, "x": x, "dp": None, "dn": None, "w": 0.0, "yh": None, "free": None, "tip": None}
+         if carry is None else dict(carry))
     n = len(steps) if stop is None else stop
     for i in range(start, n):
         kind, e = steps[i]
@@ -203,13 +238,14 @@ def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: C
             if moves is not None:
                 c["dp"] = moves[0] if c["dp"] is None else c["dp"] + moves[0]
                 c["dn"] = moves[1] if c["dn"] is None else c["dn"] + moves[1]
+            c["w"] += e.type.widening(e)
         elif kind == "hyst":
             c["x"] = c["z"]
             if state is not None and state.y is not None:
                 yh0 = state.y
             else:
                 yh0 = _rest(plan, sig.y0, sig)
-            y = _hysteresis(kn, c["z"], yh0, c["dp"], c["dn"])
+            y = _hysteresis(kn, c["z"], yh0, c["dp"], c["dn"], c["w"], sig, state)
             if state is not None and y.size:
                 state.y = float(y[-1])
             c["z"] = c["yh"] = y
@@ -490,7 +526,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
         sig = sig_of(k, other)
         for kind, e in steps[lo:hi]:
             if kind == "hyst":
-                z = _hysteresis_inverse(kns[k], z, plan, sig)
+                z = _hysteresis_inverse(kns[k], z, plan, sig, opts["max_lead"], warnings)
             else:
                 z = e.type.inverse(e, z, sig, e.type.new_inverse_state(e), warnings, opts)
         return z
@@ -553,20 +589,35 @@ def _commands_run(run, t, q: Mapping[int, np.ndarray]):
     return Run(cols, meta, run.source)
 
 
-def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals) -> np.ndarray:
+def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals, max_lead: float = 30.0,
+                        warnings: list[str] | None = None) -> np.ndarray:
     dp = dn = None
+    widen = 0.0
     for e in plan.edges:
         moves = e.type.edges(e, r.size, sig)
         if moves is not None:
             dp = moves[0] if dp is None else dp + moves[0]
             dn = moves[1] if dn is None else dn + moves[1]
+        widen += e.type.widening(e)
     # the hysteresis starts where the forward chain starts it: behind a straight tip reading
     # (0 unless an output stage bends the static map, e.g. a coupling that pushes the tip)
     yh0 = _rest(plan, 0.0, sig)
-    if dp is None:
+    if dp is None and widen == 0.0:
         return kn.inverse(r, y0=yh0)
+    t = np.ascontiguousarray(sig.need_t("rate"), dtype=np.float64) if widen != 0.0 else _NONE
     out = np.empty_like(r)
-    kernels.inverse_edges_kernel(np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
-                                 np.ascontiguousarray(dp, dtype=np.float64), np.ascontiguousarray(dn, dtype=np.float64),
-                                 yh0, kn.holding_knob_angle(yh0), out)
+    _, limited = kernels.inverse_edges_kernel(
+        np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
+        _NONE if dp is None else np.ascontiguousarray(dp, dtype=np.float64),
+        _NONE if dn is None else np.ascontiguousarray(dn, dtype=np.float64),
+        _NONE, _NONE, float(widen), float(max_lead), t, kernels.new_speed_state(), yh0, kn.holding_knob_angle(yh0), out)
+    if limited and warnings is not None:
+        warnings.append(_lead_warning(sig.k, widen, max_lead))
     return out
+
+
+def _lead_warning(k: int, widen: float, max_lead: float) -> str:
+    """What the inverse says when a speed-widened backlash needed a command step beyond ``max_lead``."""
+    return (f"knob {k}: the viscous backlash (c_visc {widen:g} s) needed command steps beyond max_lead "
+            f"{max_lead:g} deg (the command's own speed widens the backlash it crosses): the commands "
+            "miss the reference there")

@@ -104,20 +104,78 @@ def partial_unlag_kernel(target, t, fraction, tau, lead, st, out):
     st[0], st[1], st[2] = u_prev, z, tp
 
 
+SPEED_TAU = 0.05
+"""Time constant (s) of the knob-speed estimate a speed-widened backlash reads (``rate`` form
+``backlash``).
+
+The speed is ``v = (x - lag(x, SPEED_TAU)) / SPEED_TAU``: the first-order filtered derivative of
+the knob input, with :func:`lag_kernel`'s exact discretisation, so a ramp of speed v reads exactly
+v once the filter has settled (about 3 * SPEED_TAU after a change of speed). Why not a backward
+difference: a knob reading quantised to q deg at sample rate fs makes ``dx/dt`` jump by ``q * fs``
+(0.01 deg at 2 kHz: 20 deg/s of noise), while this filter's noise is ``q / SPEED_TAU`` (0.2 deg/s)
+whatever the rate, and it reads the same speed on a run decimated for the diagnosis' search. 0.05 s
+trails a speed change by less than the backlash crossing takes at catheter speeds (a few deg at
+10-40 deg/s: 0.1-0.5 s)."""
+
+
+def new_speed_state() -> np.ndarray:
+    """A knob-speed estimate's state at rest (a lag state ``[z, t, x]``; NaN: at rest, speed 0)."""
+    return np.full(LAG_STATE, np.nan)
+
+
 @njit(cache=True, fastmath=False)
-def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, y0, out):
+def _speed_step(xi, ti, st, tau):
+    # one sample of lag_kernel on the knob input (st = [z, t, x], NaN: at rest on xi) and the
+    # speed it reads after it: (x - z) / tau, the same operations as knob_speed_kernel
+    if math.isnan(st[0]):
+        st[0], st[1], st[2] = xi, ti, xi
+        return 0.0
+    dt = ti - st[1]
+    if dt > 0.0:
+        e = math.exp(-dt / tau)
+        lag = tau * (xi - st[2]) / dt
+        st[0] = xi - lag + e * (st[0] - st[2] + lag)
+    st[1] = ti
+    st[2] = xi
+    return (xi - st[0]) / tau
+
+
+@njit(cache=True, fastmath=False)
+def knob_speed_kernel(x, t, tau, st, out):
+    """The knob-speed estimate (deg/s) of :data:`SPEED_TAU`'s notes at every sample, from state ``st``
+    (``[z, t, x]`` of the last sample, NaN: at rest); leaves ``st`` at the last sample."""
+    for i in range(x.shape[0]):
+        out[i] = _speed_step(x[i], t[i], st, tau)
+
+
+@njit(cache=True, fastmath=False)
+def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, ep, en, y0, out):
     """The clamp recursion of DESIGN.md section 3 with edges that move sample by sample.
 
-    At sample i the edges are ``d_pos + dp[i]`` and ``d_neg + dn[i]``; the far edges follow by
-    eq. D_hats (``dhat_pos`` moves with ``d_neg``, ``dhat_neg`` with ``d_pos``). Where a narrowing
-    makes the envelopes cross, the descending one wins (the clamp's order), as in the static model.
+    At sample i the edges are ``d_pos + dp[i]`` and ``d_neg + dn[i]``; the far edges (the backlash
+    plateaus' ends) follow them by eq. D_hats (``dhat_pos`` moves with ``d_neg``, ``dhat_neg`` with
+    ``d_pos``) and move apart from them by ``ep[i]``, ``en[i]``: ``dhat_pos + dn[i] + ep[i]`` and
+    ``dhat_neg + dp[i] + en[i]`` (a backlash width b_neg grows by ``ep``, b_pos by ``-en``). An
+    empty ``dp``/``dn`` or ``ep``/``en`` pair means no such move (the numbers are then those of the
+    kernel without it, bit for bit). Where a move makes the envelopes cross, the descending one
+    wins (the clamp's order), as in the static model.
     """
+    moved = dp.shape[0] > 0
+    apart = ep.shape[0] > 0
     y = y0
+    a = 0.0
+    b = 0.0
     for i in range(x.shape[0]):
         u = x[i] - offset
-        a, b = dn[i], dp[i]
-        lo = h_pos + omega * (min(u - dhat_pos - a, 0.0) + max(u - d_pos - b, 0.0))
-        hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(u - dhat_neg - b, 0.0))
+        if moved:
+            a, b = dn[i], dp[i]
+        far_pos = u - dhat_pos - a
+        far_neg = u - dhat_neg - b
+        if apart:
+            far_pos = far_pos - ep[i]
+            far_neg = far_neg - en[i]
+        lo = h_pos + omega * (min(far_pos, 0.0) + max(u - d_pos - b, 0.0))
+        hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(far_neg, 0.0))
         if y < lo:
             y = lo
         if y > hi:
@@ -127,26 +185,104 @@ def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
 
 
 @njit(cache=True, fastmath=False)
-def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, y0, x0, out):
-    """Exact inverse of :func:`forward_edges_kernel` (the moving-edge form of the model's inverse)."""
+def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, ep, en,
+                         widen, lead, t, sst, y0, x0, out):
+    """Exact inverse of :func:`forward_edges_kernel` (the moving-edge form of the model's inverse).
+
+    ``dp``, ``dn``, ``ep``, ``en`` as there (empty: none). ``widen`` (s) adds a backlash that grows
+    with the speed of the command this kernel writes: both plateau ends move apart by
+    ``widen * |v|``, ``v`` the knob-speed estimate (:func:`knob_speed_kernel`, state ``sst``,
+    times ``t``) *up to the previous sample*. Being one sample behind, the move is known before
+    ``x_i`` is solved for, so the solve stays explicit and exact: :func:`forward_edges_kernel` with
+    ``ep = widen * |v_{i-1}|``, ``en = -ep`` gives ``r`` back, for ``widen <= SPEED_TAU``.
+
+    Beyond that the command's own speed feeds back: a step of the command reads as speed, which
+    widens the backlash, which asks for a further step, ``widen / SPEED_TAU`` times the last: for a
+    ratio above 1 an exact inverse is unstable (it rings into any limit). The inverse then reads its
+    speed through a slower filter, :func:`inverse_speed_tau` (``2 * widen``: a loop gain of about 1/2), so
+    it is stable but approximate where the speed changes (after a reversal, for about that time);
+    at a steady speed both read the same speed and the command is exact again.
+
+    A plateau end moved past its dead-zone edge (``dhat_pos + ... > d_pos``: the dead zone used
+    up) leaves the envelope continuous and monotone with slope ``2 omega`` between the two (both
+    tendons act at once, :func:`forward_edges_kernel`'s sum); its inverse there is the middle case
+    below. Returns the hysteresis output at the end and the number of samples where a widened
+    command's step was limited to ``lead`` deg (0: exact everywhere; module :mod:`.rate` notes).
+    ``widen == 0``: ``t``, ``sst`` and ``lead`` are not read.
+    """
+    moved = dp.shape[0] > 0
+    apart = ep.shape[0] > 0
     y = y0
     x = x0
+    a = 0.0
+    b = 0.0
+    v = 0.0
+    limited = 0
+    tau = inverse_speed_tau(widen)
+    if widen != 0.0 and not math.isnan(sst[0]):
+        v = (sst[2] - sst[0]) / tau  # the speed after the last sample of an earlier call
     for i in range(r.shape[0]):
         ri = r[i]
-        a, b = dn[i], dp[i]
+        if moved:
+            a, b = dn[i], dp[i]
+        far_pos = dhat_pos + a
+        far_neg = dhat_neg + b
+        if apart:
+            far_pos = far_pos + ep[i]
+            far_neg = far_neg + en[i]
+        if widen != 0.0:
+            g = widen * abs(v)
+            far_pos = far_pos + g
+            far_neg = far_neg - g
+        xp = x
+        yp = y
         if ri > y:
-            if ri > h_pos:
-                x = d_pos + b + (ri - h_pos) / omega + offset
+            near = d_pos + b
+            if far_pos > near and h_pos + omega * (near - far_pos) < ri <= h_pos + omega * (far_pos - near):
+                x = 0.5 * (far_pos + near + (ri - h_pos) / omega) + offset
+            elif ri > h_pos:
+                x = near + (ri - h_pos) / omega + offset
             else:
-                x = dhat_pos + a + (ri - h_pos) / omega + offset
+                x = far_pos + (ri - h_pos) / omega + offset
             y = ri
         elif ri < y:
-            if ri < h_neg:
-                x = d_neg + a + (ri - h_neg) / omega + offset
+            near = d_neg + a
+            if far_neg < near and h_neg + omega * (far_neg - near) <= ri < h_neg + omega * (near - far_neg):
+                x = 0.5 * (far_neg + near + (ri - h_neg) / omega) + offset
+            elif ri < h_neg:
+                x = near + (ri - h_neg) / omega + offset
             else:
-                x = dhat_neg + b + (ri - h_neg) / omega + offset
+                x = far_neg + (ri - h_neg) / omega + offset
             y = ri
+        if widen != 0.0:
+            if x > xp + lead or x < xp - lead:
+                # a step beyond the lead limit: the command's own speed widens the backlash it
+                # must cross (rate notes); take the limited step and the output it reaches
+                x = xp + lead if x > xp else xp - lead
+                limited += 1
+                y = _forward_one(x - offset, yp, d_pos, d_neg, far_pos, far_neg, b, a, omega, h_pos, h_neg)
+            v = _speed_step(x, t[i], sst, tau)
         out[i] = x
+    return y, limited
+
+
+@njit(cache=True, fastmath=False)
+def inverse_speed_tau(widen):
+    """Time constant (s) of the speed estimate :func:`inverse_edges_kernel` reads for a backlash
+    widening ``widen`` (s): :data:`SPEED_TAU` (the forward's, exact) up to ``widen = SPEED_TAU``,
+    ``2 * widen`` beyond (a stable loop; its notes)."""
+    return SPEED_TAU if widen <= SPEED_TAU else 2.0 * widen
+
+
+@njit(cache=True, fastmath=False)
+def _forward_one(u, y, d_pos, d_neg, far_pos, far_neg, b, a, omega, h_pos, h_neg):
+    # one sample of forward_edges_kernel with the far edges already moved
+    lo = h_pos + omega * (min(u - far_pos, 0.0) + max(u - d_pos - b, 0.0))
+    hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(u - far_neg, 0.0))
+    if y < lo:
+        y = lo
+    if y > hi:
+        y = hi
     return y
 
 
