@@ -748,7 +748,8 @@ class _Search:
         stretch from where a slack search began (no taut start, turn or contact), the kink's level
         and every reading before it (but the first, where a stiction burst may sit, unless it is
         the only one) within the kink's own no-load band (:meth:`_level_bands`), and the loaded
-        line meeting those readings' mean level within :data:`MAX_OFFSET_SE` of the kink."""
+        line meeting the mean level of the kink's flat readings within :data:`MAX_OFFSET_SE` of
+        the kink."""
         if not self.seg_from_start or self.start_outside or self.contacts:
             return False
         c0 = self.th.no_load(self.dir, self.moving)[0]
@@ -756,15 +757,19 @@ class _Search:
             return False
         _, _, band_own = self._level_bands(kink, noise)
         q, c = np.array(self.seg_q), np.array(self.seg_c)
-        flat = c[self.dir * (q - kink.at) < 0]
-        if flat.size > 1:
-            flat = flat[1:]
-        if flat.size == 0 or kink.after <= 0:
+        before = c[self.dir * (q - kink.at) < 0]
+        if before.size == 0 or kink.after <= 0:
             return False
-        # the few readings' own slope is loose: the edge where the loaded line meets their mean
-        # level (a dead zone's flat) must agree with the fitted kink to MAX_OFFSET_SE
-        pinned = (float(np.mean(flat)) - kink.level) / kink.after
-        return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(flat - c0) <= band_own)
+        own = before[-kink.n_before:] if kink.n_before > 0 else before[-1:]
+        if before.size > 1:
+            before = before[1:]
+        if own.size > 1 and own.size == c[self.dir * (q - kink.at) < 0].size:
+            own = own[1:]
+        # the few readings' own slope is loose: the edge where the loaded line meets the mean
+        # level of the kink's flat readings (a dead zone's flat) must agree with the fitted kink
+        # to MAX_OFFSET_SE
+        pinned = (float(np.mean(own)) - kink.level) / kink.after
+        return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
                     and abs(pinned) <= MAX_OFFSET_SE)
 
     def _judge_rest(self, kink, noise: float, span_before: float) -> tuple[str, str]:  # noqa: ANN001
