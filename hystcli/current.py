@@ -28,6 +28,15 @@ N_PIECES = 5
 """Straight pieces a stretch is split into (plateau, unloading, dead zone, loading, a wall or a
 stiffening cable)."""
 
+N_PIECES_SELECT = 8
+"""Most straight pieces a stretch may be split into when the readings' noise decides how many pay
+for themselves (:func:`pieces` with ``sig``): a search that crossed the dead zone from a taut start
+holds a backlash plateau, a steep unloading, the unloading's softer tail, the dead zone, the
+loading and a wall or a stiffening cable in one stretch, and with :data:`N_PIECES` the tail of the
+unloading is merged into the dead zone's piece (design seed 1140 of ``bench/zoo.py``: a fit residual
+five times the noise, the edge refused). The information criterion, not this cap, keeps noise from
+being cut into little pieces."""
+
 JUMP_RATIO = 0.6
 """A piece counts as flatter than the next one when its slope is below this share of the next."""
 
@@ -289,15 +298,17 @@ def pieces(x: np.ndarray, v: np.ndarray, minlen: int,
     """Split binned points into straight pieces: ``(first, stop, slope, level at first)``.
 
     Into :data:`N_PIECES` pieces (fewer when there are too few points); with ``sig`` (the noise
-    of one point), into as many as pay for themselves by the Bayesian information criterion:
+    of one point), into as many as pay for themselves by the Bayesian information criterion (up
+    to :data:`N_PIECES_SELECT`):
     each piece costs its three parameters (level, slope, where it starts) ``log(n)`` noise
     variances of residual, so the noise of a few readings is not cut into steep little pieces
     (a kink clear enough to take, seven standard errors, earns far more than that).
     """
     n = x.size
-    kmax = max(1, min(N_PIECES, n // max(minlen, 1)))
+    selecting = sig is not None and sig > 0
+    kmax = max(1, min(N_PIECES_SELECT if selecting else N_PIECES, n // max(minlen, 1)))
     xs, vs = np.ascontiguousarray(x), np.ascontiguousarray(v)
-    if sig is not None and sig > 0 and kmax > 1:
+    if selecting and kmax > 1:
         best, arg = _segment_tables(xs, vs, kmax, minlen)
         crit = best[1:, n] / sig ** 2 + 3.0 * math.log(n) * np.arange(1, kmax + 1)
         k = 1 + int(np.argmin(crit))

@@ -43,7 +43,10 @@ real current is not one law:
   own noise, the current level at the kink against the no-load level, the slopes either side.
   The flat stretch before the kink needs as many readings as the loaded one after it
   (:data:`AFTER_STEPS`, over 1.5 deg): a kink a step from where the readings begin has no dead
-  zone behind it. The offset must be placed to
+  zone behind it. (Where a slack search begins a step or two short of an edge, the few readings
+  before it may still sit at the no-load level the identification measured, which a dead zone's
+  do: that edge is held in reserve and taken only when the search can go no further, the far
+  edge out of reach.) The offset must be placed to
   :data:`MAX_OFFSET_SE`: the kink's standard error (a loosely placed kink waits for more of the
   loaded stretch) and, on the stretch from where
   the search began, how far back the edge would lie were the flat the taken-up tendon's backlash
@@ -617,6 +620,7 @@ class _Search:
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
+        self.short = None            # (direction, kink): an edge at the start on a flat at the no-load level
         self.arrival = None          # where an unloading tendon's current met the dead zone
         self.plateaus = {1: 0.0, -1: 0.0}
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
@@ -723,8 +727,53 @@ class _Search:
         before = [v for v in self.seg_q if self.dir * (v - kink.at) < 0]
         span_before = self.dir * (kink.at - before[-kink.n_before]) if 0 < kink.n_before <= len(before) else 0.0
         if kink.n_before < AFTER_STEPS or span_before < max(1.5, 3 * self.u):
-            return REFUSE, (f"the kink at {kink.at:.2f} deg has too short a flat stretch before it "
-                            f"({kink.n_before} readings over {span_before:.1f} deg)")
+            why = (f"the kink at {kink.at:.2f} deg has too short a flat stretch before it "
+                   f"({kink.n_before} readings over {span_before:.1f} deg)")
+            # an edge a step or two from where a slack search began: its flat is too short to
+            # tell a dead zone from the current's waviness by its slope, but not by its level,
+            # which the identification measured: held in reserve (taken only when the search can
+            # go no further) when it passes every other check from where the dead zone lies
+            if self.seg_from_start and not self.start_outside:
+                status = REFUSE
+                if self._flat_on_no_load(kink, noise):
+                    unplaced = dict(self.unplaced)   # a kink in reserve is no evidence to compare with
+                    status = self._judge_rest(kink, noise, span_before)[0]
+                    self.unplaced = unplaced
+                self.short = (self.dir, kink) if status in (ACCEPT, READY) else None
+            return REFUSE, why
+        return self._judge_rest(kink, noise, span_before)
+
+    def _flat_on_no_load(self, kink, noise: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether a kink's few readings before it are the dead zone's by their level: on the
+        stretch from where a slack search began (no taut start, turn or contact), the kink's level
+        and every reading before it (but the first, where a stiction burst may sit, unless it is
+        the only one) within the kink's own no-load band (:meth:`_level_bands`), and the loaded
+        line meeting the mean level of the kink's flat readings within :data:`MAX_OFFSET_SE` of
+        the kink."""
+        if not self.seg_from_start or self.start_outside or self.contacts:
+            return False
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        if c0 is None:
+            return False
+        _, _, band_own = self._level_bands(kink, noise)
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        before = c[self.dir * (q - kink.at) < 0]
+        if before.size == 0 or kink.after <= 0:
+            return False
+        own = before[-kink.n_before:] if kink.n_before > 0 else before[-1:]
+        if before.size > 1:
+            before = before[1:]
+        if own.size > 1 and own.size == c[self.dir * (q - kink.at) < 0].size:
+            own = own[1:]
+        # the few readings' own slope is loose: the edge where the loaded line meets the mean
+        # level of the kink's flat readings (a dead zone's flat) must agree with the fitted kink
+        # to MAX_OFFSET_SE
+        pinned = (float(np.mean(own)) - kink.level) / kink.after
+        return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
+                    and abs(pinned) <= MAX_OFFSET_SE)
+
+    def _judge_rest(self, kink, noise: float, span_before: float) -> tuple[str, str]:  # noqa: ANN001
+        """:meth:`_judge`'s checks of a kink whose flat stretch is long enough to be one."""
         # a dead zone climbs at most its pretension's swing across its whole width: a flat
         # stretch that climbs further began as a tendon unloading toward the dead zone, and a
         # fit that spans both places the kink late (the reading in reserve leaves the unloading
@@ -975,6 +1024,7 @@ class _Search:
                     sig = _reading_noise(c)
                     self.steep[self.dir] = self._steep_edge(q, c, sig if math.isfinite(sig) and sig > 0 else 1e-9)
                     self.contacts.append(self.q)
+                    self.short = None    # a rise at the start that ends on a wall is no edge to keep
                     both = self._steep_pair()
                     if both is not None:
                         self.dir = both[0]
@@ -1040,6 +1090,11 @@ class _Search:
                 # the edge passed every check on the readings there are: the search can go no
                 # further to lengthen its loaded stretch
                 return LOAD, self.ready
+            if self.short is not None:
+                # no edge with a flat long enough to read lay within reach: the one at the start,
+                # whose few flat readings sat at the no-load level, is the evidence there is
+                self.dir = self.short[0]
+                return LOAD, self.short[1]
             why = f"; the last candidate was refused: {self.pending_refusal}" if self.pending_refusal else ""
             where = (" (it met a taut tendon with no edge to read and went through the dead zone toward the "
                      "other edge)" if self.turned else

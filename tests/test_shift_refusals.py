@@ -84,6 +84,26 @@ def test_a_kink_with_no_dead_zone_behind_it_is_not_taken_the_far_edge_is():
         assert r.offset == pytest.approx(dn - STRAIGHT.d_neg, abs=0.25), seed
 
 
+
+def test_an_edge_at_the_start_on_the_no_load_level_is_taken_when_the_far_edge_is_out_of_reach():
+    # the knob rests 1.8 deg short of the positive edge (dead zone [-12.2, 1.8]: the straight one
+    # shifted by -7.2); three or four readings before the edge are too short a flat to read by its
+    # slope, but they sit at the no-load level the identification measured. With the far edge
+    # beyond the travel limit (8 deg), that edge is the evidence there is: held in reserve, it is
+    # taken when the search can go no further (the old search refused every draw).
+    dn, dp = -12.2, 1.8
+    law = tendons(dn, dp)
+    taken = 0
+    for seed in range(16):
+        try:
+            r = detect_shift(model(), Knob(law, seed=seed), 1, max_travel=8.0)
+        except ShiftDetectionError as exc:
+            assert "no edge found" in str(exc), seed
+            continue
+        taken += 1
+        assert r.edge == "pos" and r.offset == pytest.approx(dp - STRAIGHT.d_pos, abs=0.5), seed
+    assert taken >= 8, taken
+
 # --------------------------------------------------------------------------------------------
 # reading a stepping search's few readings (hystcli.current.loading_edge)
 # --------------------------------------------------------------------------------------------
@@ -363,3 +383,24 @@ def test_an_unplaced_edge_met_on_the_way_must_agree_with_the_placed_one():
         # with d_neg where the tendon is, the two agree and the offset (0) stands
         r = detect_shift(ident_model(-5.0), Knob(law, seed=seed), 1)
         assert r.edge == "neg" and r.offset == pytest.approx(0.0, abs=0.25), seed
+
+
+# --------------------------------------------------------------------------------------------
+# a taut start's whole unloading in the stretch the search reads
+# --------------------------------------------------------------------------------------------
+def test_the_tail_of_an_unloading_is_not_merged_into_the_dead_zone():
+    # readings every 0.5 deg from a taut start: the tendon behind holds 1400 mA to q = 5, unloads
+    # at 200 mA/deg to q = 10 and then eases into the dead zone (400 exp(-(q - 10)) mA, a tail of
+    # a few degrees); the dead zone is flat to the edge at q = 24, past which the tendon ahead
+    # loads at 35 mA/deg, stiffening to 70 past q = 27. Seven straight pieces: split into five,
+    # the tail is fitted as part of the dead zone and the two-line fit misses the readings by
+    # four times their noise (a refusal); as many pieces as the noise pays for place the edge.
+    q = np.arange(0.5, 32.01, 0.5)
+    law = (np.where(q < 5, 1400.0, np.where(q < 10, 1400.0 - 200.0 * (q - 5.0), 400.0 * np.exp(-(q - 10.0))))
+           + 35.0 * np.maximum(q - 24.0, 0.0) + 35.0 * np.maximum(q - 27.0, 0.0))
+    for seed in range(4):
+        c = law + np.random.default_rng(seed).normal(0.0, 1.5, q.size)
+        k = loading_edge(q, c, 1, 1.5, resolution=0.02, strict_flat=True, select=True, convex=True)
+        assert k is not None, seed
+        assert k.at == pytest.approx(24.0, abs=0.15), seed
+        assert k.residual < 2.0 * 1.5 and k.se < 0.1, seed
