@@ -14,7 +14,8 @@ deadzone    the shape changes the dead zone                          width, cent
 stretch     a stated load stretches the cable: the output moves     linear, stiffening, slack
 coupling    the other knob moves this knob's loop                    input, output, deadzone
                                                                      (each also -magnitude)
-rate        viscous lag of the tip behind the knob                   input, input2, output, output2
+rate        viscous lag of the tip behind the knob                   input, input2, output, output2,
+                                                                     backlash
 saturation  the bending section stiffens near its largest bend       smooth, hard, asymmetric,
                                                                      smooth-knobs, hard-knobs
 creep       slow relaxation: a fraction of each move arrives late    relax
