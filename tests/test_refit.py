@@ -83,3 +83,22 @@ def test_a_two_knob_sweep_carries_a_bend_coupling_and_the_refit_takes_it_off():
     assert not R.carries(eff.type, eff.type.get_form("deadzone-magnitude"), sw)
     one = R.prepare_sweep(_sweep(0.0), Model({1: TRUE, 2: TRUE2}))
     assert not R.carries(eff.type, eff.spec_form, one)
+
+
+def test_a_viscous_backlash_sweep_gives_its_widening_back():
+    # _sweep's triangle (40 deg amplitude, 8 s period) turns the knob at 4 * 40 / 8 = 20 deg/s, so
+    # it identifies both plateaus c_visc * 20 deg/s too wide (c_visc = 0.05 s: 1 deg); the loop the
+    # hypothesis implies is the identified one with that taken off (hand-computed: b - 0.05 * 20).
+    # The sweep's own tip does not enter: the wide model stands in for what identify read.
+    sweep = _sweep(0.0)
+    wide = KnobModel(**{**TRUE.params(), "b_pos": TRUE.b_pos + 1.0, "b_neg": TRUE.b_neg + 1.0})
+    model = Model({1: wide})
+    sw = R.prepare_sweep(sweep, model)
+    eff = E.make_effect("rate", "backlash", c_visc=0.05)
+    assert R.carries(eff.type, eff.spec_form, sw)
+    kn = R.refit(sw, model, eff)[1]
+    assert abs(kn.b_pos - TRUE.b_pos) < 0.02 and abs(kn.b_neg - TRUE.b_neg) < 0.02
+    # the edges and the slope stay: the widening moves only the plateau ends
+    assert (kn.d_pos, kn.d_neg, kn.omega) == (wide.d_pos, wide.d_neg, wide.omega)
+    # a widening larger than the sweep can have held leaves a zero width, never a negative one
+    assert R.refit(sw, model, E.make_effect("rate", "backlash", c_visc=1.0))[1].b_pos == 0.0
