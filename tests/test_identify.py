@@ -531,3 +531,22 @@ def test_current_only_judges_a_wall_against_the_loaded_slope_of_the_reversal_str
     case = plants.sweep_case(1732, tip=False)
     with pytest.raises(IdentificationError, match="the current cannot fix"):
         identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
+def test_a_stiffening_cables_steep_unloading_after_a_held_plateau_is_unloading_not_backlash():
+    # read_current's pieces of one stretch from a reversal (hand-built, bins of 0.5 deg): a held
+    # plateau (slope 0.5 mA/deg, 0-5.5 deg), then a stiffening cable's unloading split in two, steep
+    # where the load is largest (126) and softer (78), the dead zone (9), the loading (50). The
+    # longest unloading piece is the soft one; the steep one is 1.6x it, short of a friction flip
+    # (2x): the backlash ends where the held plateau does, (5.5 + 6.0) / 2 = 5.75 deg (the reading
+    # before took the steep piece as backlash and ended it at 14.75)
+    from hystcli.identify import current as IC
+
+    xb = np.arange(0.0, 60.0, 0.5)
+    pieces = [(0, 12), (12, 30), (30, 50), (50, 76), (76, 106)]
+    width, held = IC._plateau(pieces, [0.5, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
+    assert held and width == pytest.approx(5.75)
+    # without a held plateau before it the steep piece may be the friction's flip and stays the
+    # backlash phase; with neither a held plateau nor a 2x flip there is no backlash to read
+    width, held = IC._plateau(pieces, [40.0, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
+    assert width is None and not held

@@ -210,6 +210,12 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
                    plateau_held=held, end_slope=end_slope, resolution=width)
 
 
+FLIP = 2.0
+"""A fall at least this many times the unloading slope over the backlash is the sheath friction
+flipping sign (:func:`_plateau`); a steeper piece short of it, right before the unloading slope, is
+the stiff end of the unloading itself."""
+
+
 def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[float | None, bool]:
     """Travel from a reversal to where the tendon starts unloading (the backlash), when it shows.
 
@@ -238,6 +244,24 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
         return None, False
     while ju > 0 and abs(slopes[ju - 1] - unload) < 0.4 * unload:
         ju -= 1
+    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload else 0.0
+
+    def held(k: int) -> bool:
+        # flat, or no steeper than the dead zone's own slope (a pretensioned tendon's spring, or
+        # the motor's viscous term following the sine's speed, tilt the plateau the same as the
+        # dead zone: the load itself does not change)
+        return min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * unload and lengths[k] >= 1.0
+
+    # a stiffening cable unloads convexly: steepest just after the plateau, where its load is
+    # largest, and the segmentation splits the unloading into a steep piece and a softer one. After
+    # a held plateau, the pieces up to the unloading slope that are steeper than it by less than a
+    # sheath friction's flip (twice, below) are the same unloading. Without a held plateau such a
+    # piece may be the flip itself (the twin's sheath friction), and stays the backlash phase
+    j = ju
+    while j > 0 and unload <= slopes[j - 1] < FLIP * unload:
+        j -= 1
+    if j < ju and j > 0 and held(j - 1):
+        ju = j
     length = sum(lengths[ju:dead])
     if ju == 0 or not (length >= 1.0 and unload * length > 6 * sig):
         return None, False
@@ -246,13 +270,8 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     # over the plateau's width (a fall at least twice the unloading slope, longer than the
     # motor's own Coulomb flip at a reversal, which is over within a degree or two)
     before = range(ju)
-    # held: flat, or no steeper than the dead zone's own slope (a pretensioned tendon's spring, or
-    # the motor's viscous term following the sine's speed, tilt the plateau the same as the dead
-    # zone: the load itself does not change)
-    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload else 0.0
-    plateau = any(min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * unload and lengths[k] >= 1.0
-                  for k in before)
-    flip = sum(lengths[k] for k in before if slopes[k] >= 2.0 * unload) >= 2.0
+    plateau = any(held(k) for k in before)
+    flip = sum(lengths[k] for k in before if slopes[k] >= FLIP * unload) >= 2.0
     if not (plateau or flip):
         return None, False
     return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]])), plateau
