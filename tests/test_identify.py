@@ -550,3 +550,8 @@ def test_a_stiffening_cables_steep_unloading_after_a_held_plateau_is_unloading_n
     # backlash phase; with neither a held plateau nor a 2x flip there is no backlash to read
     width, held = IC._plateau(pieces, [40.0, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
     assert width is None and not held
+    # softening in turn over three pieces (210 -> 150 -> 96, each less than twice the next): all
+    # unloading, though the first is more than twice the last
+    pieces3 = [(0, 12), (12, 20), (20, 30), (30, 50), (50, 76), (76, 106)]
+    width, held = IC._plateau(pieces3, [0.5, 210.0, 150.0, 96.0, 9.0, 50.0], xb, 1.0, True, 4)
+    assert held and width == pytest.approx(5.75)

@@ -253,12 +253,12 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
         return min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * unload and lengths[k] >= 1.0
 
     # a stiffening cable unloads convexly: steepest just after the plateau, where its load is
-    # largest, and the segmentation splits the unloading into a steep piece and a softer one. After
-    # a held plateau, the pieces up to the unloading slope that are steeper than it by less than a
-    # sheath friction's flip (twice, below) are the same unloading. Without a held plateau such a
+    # largest, and the segmentation splits the unloading into pieces that soften in turn. After a
+    # held plateau, the pieces up to the unloading slope that each are steeper than the next by
+    # less than a sheath friction's flip (twice, below) are the same unloading. Without a held plateau such a
     # piece may be the flip itself (the twin's sheath friction), and stays the backlash phase
     j = ju
-    while j > 0 and unload <= slopes[j - 1] < FLIP * unload:
+    while j > 0 and slopes[j] <= slopes[j - 1] < FLIP * slopes[j]:
         j -= 1
     if j < ju and j > 0 and held(j - 1):
         ju = j
