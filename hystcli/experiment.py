@@ -832,7 +832,7 @@ def _diagnose_catheter(cat: VirtualCatheter, model: Model, runs: Sequence[Run]) 
     row = DiagnosisRow(cat.name, len(runs), tuple((s.name, dict(s.params)) for s in d.selected),
                        tuple((e.name, dict(e.params)) for e in cat.default_effects),
                        d.how_far.rmse_before, d.how_far.rmse_after, d.holdout,
-                       tuple("" if s.effect().is_default_form else s.effect().form for s in d.selected))
+                       tuple(s.form for s in d.selected))
     return d.model, row
 
 

@@ -60,7 +60,7 @@ class _Hysteresis:
     ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
 
     __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
-                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "widen", "sz", "stp", "sx", "lead", "warnings", "tau")
+                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "widen", "speed", "lead", "warnings", "tau")
 
     def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect],
                  widen: float = 0.0, lead: float = 30.0, warnings: list[str] | None = None) -> None:
@@ -69,10 +69,10 @@ class _Hysteresis:
         self.outputs = tuple(outputs)      # output stages: where the hysteresis starts behind a reading
         # a backlash that widens with the knob's speed (rate form backlash): the plateau ends move
         # apart by widen*|v|, v the speed estimate of the commands up to the previous sample
-        # (kernels.inverse_edges_kernel; its lag state [z, t, x] is sz, stp, sx here)
+        # (kernels.inverse_edges_kernel: the speed is (x - lag(x, tau)) / tau, its lag one LagStep)
         self.widen = float(widen)
-        w = self.widen
-        self.tau = kernels.SPEED_TAU if w <= kernels.SPEED_TAU else 2.0 * w   # kernels.inverse_speed_tau
+        self.tau = float(kernels.inverse_speed_tau(self.widen))
+        self.speed = kernels.LagStep(self.tau)
         self.lead = float(lead)
         self.warnings = warnings
         self.y0 = 0.0
@@ -88,7 +88,7 @@ class _Hysteresis:
         self.fresh = True
         self.y0 = float(y0)
         self.y = self.x = 0.0
-        self.sz = self.stp = self.sx = math.nan   # the speed estimate at rest
+        self.speed.reset()   # the speed estimate at rest
 
     def _start(self, other: float | None) -> None:
         # the hysteresis state behind the tip reading y0 at rest, as the batch inverse starts it
@@ -108,7 +108,7 @@ class _Hysteresis:
         y = self.y
         if r == y:
             if self.widen != 0.0:
-                self._speed(self.x, t)
+                self.speed.step(self.x, t)
             return self.x
         # the dead-zone edges as the other knob moves them this sample (coupling)
         b = a = 0.0
@@ -120,7 +120,8 @@ class _Hysteresis:
         far_pos = self.dhat_pos + a
         far_neg = self.dhat_neg + b
         if self.widen != 0.0:
-            v = 0.0 if math.isnan(self.sz) else (self.sx - self.sz) / self.tau
+            s = self.speed
+            v = 0.0 if s.fresh else (s.up - s.z) / self.tau
             g = self.widen * abs(v)
             far_pos = far_pos + g
             far_neg = far_neg - g
@@ -158,28 +159,15 @@ class _Hysteresis:
                 self.y = y
                 if self.warnings is not None:
                     self.warnings.append(chain._lead_warning(self.k, self.widen, self.lead))
-            self._speed(self.x, t)
+            self.speed.step(self.x, t)
         return self.x
 
-    def _speed(self, x: float, t: float) -> None:
-        # kernels._speed_step in plain floats (the same operations)
-        if math.isnan(self.sz):
-            self.sz, self.stp, self.sx = x, t, x
-            return
-        dt = t - self.stp
-        if dt > 0.0:
-            tau = self.tau
-            e = math.exp(-dt / tau)
-            lag = tau * (x - self.sx) / dt
-            self.sz = x - lag + e * (self.sz - self.sx + lag)
-        self.stp = t
-        self.sx = x
-
     def save(self) -> tuple:
-        return (self.fresh, self.y, self.x, self.sz, self.stp, self.sx)
+        return (self.fresh, self.y, self.x, self.speed.save())
 
     def load(self, s: tuple) -> None:
-        self.fresh, self.y, self.x, self.sz, self.stp, self.sx = s
+        self.fresh, self.y, self.x, speed = s
+        self.speed.load(speed)
 
     @property
     def plain(self) -> bool:

@@ -190,7 +190,7 @@ def _hysteresis(kn: KnobModel, x: np.ndarray, yh0: float, dp, dn, widen: float =
     x = np.ascontiguousarray(x, dtype=np.float64)
     ep = en = _NONE
     if widen != 0.0:
-        t = np.ascontiguousarray(sig.need_t("rate"), dtype=np.float64)
+        t = np.ascontiguousarray(sig.t, dtype=np.float64)   # checked where the widening was read
         if state is not None:
             if state.speed is None:
                 state.speed = kernels.new_speed_state()
@@ -238,7 +238,9 @@ def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: C
             if moves is not None:
                 c["dp"] = moves[0] if c["dp"] is None else c["dp"] + moves[0]
                 c["dn"] = moves[1] if c["dn"] is None else c["dn"] + moves[1]
-            c["w"] += e.type.widening(e)
+            if e.type.widening(e):
+                sig.need_t(e.name)   # the speed it widens with needs the time column
+                c["w"] += e.type.widening(e)
         elif kind == "hyst":
             c["x"] = c["z"]
             if state is not None and state.y is not None:
@@ -598,13 +600,15 @@ def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals, 
         if moves is not None:
             dp = moves[0] if dp is None else dp + moves[0]
             dn = moves[1] if dn is None else dn + moves[1]
-        widen += e.type.widening(e)
+        if e.type.widening(e):
+            sig.need_t(e.name)
+            widen += e.type.widening(e)
     # the hysteresis starts where the forward chain starts it: behind a straight tip reading
     # (0 unless an output stage bends the static map, e.g. a coupling that pushes the tip)
     yh0 = _rest(plan, 0.0, sig)
     if dp is None and widen == 0.0:
         return kn.inverse(r, y0=yh0)
-    t = np.ascontiguousarray(sig.need_t("rate"), dtype=np.float64) if widen != 0.0 else _NONE
+    t = np.ascontiguousarray(sig.t, dtype=np.float64) if widen != 0.0 else _NONE
     out = np.empty_like(r)
     _, limited = kernels.inverse_edges_kernel(
         np.ascontiguousarray(r, dtype=np.float64), *kn._kernel_args(),
