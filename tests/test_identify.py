@@ -371,6 +371,58 @@ def test_a_wall_that_holds_the_tip_is_censored_and_the_free_loop_recovered(seed)
     assert len(lvl) == 1 and abs(lvl[0] - case.factors["wall_y"]) <= 4 * max(case.factors["noise_y"], 0.1) + 0.5
 
 
+# walls the tip meets within a degree or so of the knob's reversal (0.5-1.4 deg of advancing knob
+# at the wall); design seeds. Before: not seen as walls (the travel floor was 1.5 deg, and a noisy
+# sample out of the band split a stroke's stretch in two) and the plain fits returned d/b 0.5-1.2
+# deg off with exit 0.
+@pytest.mark.parametrize("seed", (427, 527, 1563, 1846, 2769))
+def test_a_wall_met_just_before_the_reversal_is_censored(seed):
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(seed)
+    assert case.family == "wall"
+    fit = identify(parse_run(case.record.csv_text(), source="wall")).fits[1]
+    truth = case.truth.as_dict()
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert abs(getattr(fit.model, name) - truth[name]) <= 0.5, (seed, name)
+    assert any("a wall holds the tip" in w for w in fit.warnings)
+
+
+def test_a_record_that_starts_at_a_wall_is_refused_not_returned_wrong():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # design seed 1501: the tip starts held at a wall (the knob already past it) and meets it
+    # again 1.2 deg before each top reversal. Before: no wall seen, and the fit returned b_neg
+    # 16.8 deg and d_pos 8.6 deg off with exit 0. The wall found, the grid search used to rank
+    # its candidates without the held samples (and with a few held samples that noise put below
+    # a threshold taken from the wall's noisy peak counted as free tip 2.7 deg off), and the fit
+    # stayed in the wrong basin. Now the held samples rank the candidates too, and the fit says
+    # the record cannot place the falling edge's plateau.
+    case = plants.sweep_case(1501)
+    assert case.family == "wall" and case.factors["start_taut"] == "pos"
+    with pytest.raises(IdentificationError, match="cannot fix b_neg"):
+        identify(parse_run(case.record.csv_text(), source="wall"))
+
+
+def test_the_wall_threshold_sits_below_the_samples_the_wall_holds():
+    from hystcli.identify.tip import WALL_BAND, find_walls
+
+    # a tip held at a wall at 5.0 deg for a long stretch, noise 0.1: the censoring threshold is the
+    # wall's level less WALL_BAND sigmas, so (almost) every held sample lies above it; from the
+    # noisy peak (about 5.0 + 3.5 sigma for 2000 samples) it would cut through the held samples
+    rng = np.random.default_rng(3)
+    q = np.concatenate([np.linspace(-20, 20, 2000), np.linspace(20, -20, 2000)])
+    free = 1.2 * q
+    y = np.minimum(free, 5.0) + rng.normal(0, 0.1, q.size)
+    bottom, top = find_walls(q, y, 0.1)
+    assert bottom is None and top is not None
+    held = y[(free > 5.0)]
+    assert 5.0 - (WALL_BAND + 0.5) * 0.1 <= top <= 5.0 - (WALL_BAND - 0.5) * 0.1
+    assert np.mean(held >= top) >= 0.99
+
+
 def test_no_wall_on_a_free_loop_or_a_dead_zone_flat():
     from hystcli.identify.tip import find_walls
 

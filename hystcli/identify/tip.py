@@ -166,6 +166,85 @@ def _batch_kernel(q, y, wt, cands, out):
 
 
 @njit(cache=True)
+def _batch_censored_kernel(q, y, wt, side, lvl, cands, out):
+    # _batch_kernel's SSE plus, for each sample at a wall (side +1: held at the top level y,
+    # -1: at the bottom), the squared shortfall of the candidate's free tip from the wall's
+    # censoring level lvl: the
+    # wall says the free loop reaches it. The (h_mid, omega) are the free samples' least squares,
+    # as in _batch_kernel; a candidate whose free loop stays short of the wall where the tip sits
+    # at it is ranked by how far short.
+    n = 0.0
+    syy = 0.0
+    sy = 0.0
+    for i in range(q.shape[0]):
+        n += wt[i]
+        sy += wt[i] * y[i]
+        syy += wt[i] * y[i] * y[i]
+    for m in range(cands.shape[0]):
+        dn = cands[m, 0]
+        dp = cands[m, 1]
+        bp = cands[m, 2]
+        bn = cands[m, 3]
+        dh = cands[m, 4]
+        dhp = dn + bn - dh
+        dhn = dp - bp + dh
+        half = 0.5 * dh
+        u0 = q[0]
+        lo0 = -half + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
+        hi0 = half + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
+        best = 1e300
+        for s in range(3):
+            if s == 0:
+                z0 = lo0
+            elif s == 1:
+                z0 = hi0
+            else:
+                z0 = 0.5 * (lo0 + hi0)
+            z = z0
+            sz = 0.0
+            szz = 0.0
+            szy = 0.0
+            for i in range(q.shape[0]):
+                u = q[i]
+                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+                if z < lo:
+                    z = lo
+                if z > hi:
+                    z = hi
+                sz += wt[i] * z
+                szz += wt[i] * z * z
+                szy += wt[i] * z * y[i]
+            den = n * szz - sz * sz
+            if den > 1e-12 * n * n:
+                w = (n * szy - sz * sy) / den
+            else:
+                w = 1e-3
+            if w < 1e-3:
+                w = 1e-3
+            a = (sy - w * sz) / n
+            sse = syy - 2.0 * a * sy - 2.0 * w * szy + n * a * a + 2.0 * a * w * sz + w * w * szz
+            if sse >= best:
+                continue
+            z = z0
+            for i in range(q.shape[0]):
+                u = q[i]
+                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+                if z < lo:
+                    z = lo
+                if z > hi:
+                    z = hi
+                if side[i] != 0.0:
+                    short = side[i] * (lvl[i] - (a + w * z))
+                    if short > 0.0:
+                        sse += short * short
+            if sse < best:
+                best = sse
+        out[m] = best
+
+
+@njit(cache=True)
 def _z_jac_kernel(q, dn, w, fp, fn, dh, z_init, z_out, jac):
     # z and its exact derivatives with respect to (d_neg, width, f_pos, f_neg, delta, z_init):
     # a clamped sample takes the derivative of the envelope that clamps it, a held one keeps the
@@ -529,7 +608,19 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     cands = _candidates(q_min, q_max)
     sse = np.empty(cands.shape[0])
     _batch_kernel(qs, ys, np.ones(qs.size) if free_s is None else free_s.astype(float), cands, sse)
-    thetas = [_start_from_geometry(g, qs, ys, free_s) for g in _distinct_best(cands, sse, N_STARTS, span)]
+    best_geometries = _distinct_best(cands, sse, N_STARTS, span)
+    if cs is not None:
+        # at a wall, also the best candidates whose free loop reaches the wall where the tip sits
+        # at it (the ranking above ignores those samples; on a coarse grid, ranking by their
+        # shortfall alone can also miss the right basin: design seeds 1501 and 1949 of
+        # hystcli.zoo.plants each need one of the two)
+        side = cs[0].astype(float) - cs[2].astype(float)
+        lvl = np.where(cs[0], cs[1] if cs[1] is not None else 0.0, cs[3] if cs[3] is not None else 0.0)
+        sse_w = np.empty(cands.shape[0])
+        _batch_censored_kernel(qs, ys, free_s.astype(float), side, lvl, cands, sse_w)
+        best_geometries += [g for g in _distinct_best(cands, sse_w, N_STARTS, span)
+                            if not any(np.array_equal(g, h) for h in best_geometries)]
+    thetas = [_start_from_geometry(g, qs, ys, free_s) for g in best_geometries]
     for m in starts:
         zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
         thetas.append(theta_from_model(m, zi))
@@ -614,6 +705,14 @@ def _slides_unseen(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | 
 WALL_BAND = 3.0
 """Samples within this many noise sigmas of a wall's level count as held by it."""
 
+WALL_TRAVEL = (0.5, 5.0)
+"""A wall needs at least ``max(WALL_TRAVEL[0] deg, WALL_TRAVEL[1] sigma)`` of advancing knob at the
+tip's extreme level on one stroke. A free loop (slope omega >= 0.8 deg/deg up to its reversal)
+stays within the ``WALL_BAND`` band for at most ``3 sigma / 0.8 = 3.75 sigma`` deg of knob. Design
+seeds 0-2999 of ``hystcli.zoo.plants``: walls met a degree or less before the reversal (0.9-1.4 deg
+of knob at the wall) were missed with the former floor of 1.5 deg and returned loops 0.5-17 deg
+off; the fit with the wall censored is still kept only when it halves the misfit (identify)."""
+
 
 def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None, float | None]:
     """Tip levels ``(bottom, top)`` at which a wall holds the measured tip (None: no wall seen).
@@ -622,8 +721,9 @@ def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None
     free loop the tip rises with the knob (slope omega >= 0.8 deg/deg) until the reversal, so it
     stays within the band of ``WALL_BAND`` noise sigmas of its extreme for at most about
     ``WALL_BAND sigma / omega`` deg of advancing knob; a wall holds it there for the rest of the
-    stroke. Required: on one stroke at least, ``max(1.5, 5 sigma)`` deg of advancing knob at the
-    level, reached from at least ``max(2, 6 sigma)`` deg of tip below it.
+    stroke. Required: on one stroke at least :data:`WALL_TRAVEL` of advancing knob at the level
+    (the samples in the band on that stroke, a noisy sample out of it does not split them),
+    reached from at least ``max(2, 6 sigma)`` deg of tip below it.
     """
     q = np.asarray(q, float)
     y = np.asarray(y, float)
@@ -639,6 +739,7 @@ def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None
     pad = np.pad(y, (k // 2, k // 2), mode="edge")
     ym = np.median(np.lib.stride_tricks.sliding_window_view(pad, k), axis=1)   # no lone outlier sets a level
     dq = np.gradient(q)
+    need = max(WALL_TRAVEL[0], WALL_TRAVEL[1] * sigma)
     out: list[float | None] = []
     for sign in (-1.0, 1.0):
         level = float(np.max(sign * ym))
@@ -646,16 +747,20 @@ def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None
         advancing = sign * dq > 0
         run = near & advancing
         travel = 0.0
-        # contiguous stretches at the level while the knob advances, each reached from below
-        edges = np.flatnonzero(np.diff(np.concatenate([[0], run.astype(np.int8), [0]])))
-        for a, b in zip(edges[::2], edges[1::2]):
-            j = a
-            while j > 0 and advancing[j - 1]:
-                j -= 1
+        # per stroke (a run of advancing knob), not summed over strokes: a sine's slow approach to
+        # each reversal adds up
+        strokes = np.flatnonzero(np.diff(np.concatenate([[0], advancing.astype(np.int8), [0]])))
+        for j, e in zip(strokes[::2], strokes[1::2]):
+            at = np.flatnonzero(run[j:e])
+            if at.size == 0:
+                continue
+            a = j + int(at[0])
             if level - float(np.min(sign * ym[j:a + 1])) >= max(2.0, 6.0 * sigma):
-                # per stroke, not summed: a sine's slow approach to each reversal adds up
-                travel = max(travel, float(np.ptp(q[a:b])))
-        out.append(sign * (level - WALL_BAND * sigma) if travel >= max(1.5, 5.0 * sigma) else None)
+                travel = max(travel, float(np.ptp(q[j + at])))
+        # the censoring threshold from the wall's typical level, not its noisy peak: from the peak,
+        # a few percent of the samples held at the wall fall below it and count as free tip
+        wall = float(np.median(sign * y[near])) if travel >= need else math.nan
+        out.append(sign * (wall - WALL_BAND * sigma) if travel >= need else None)
     return out[0], out[1]
 
 
