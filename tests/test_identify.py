@@ -607,3 +607,49 @@ def test_a_stiffening_cables_steep_unloading_after_a_held_plateau_is_unloading_n
     pieces3 = [(0, 12), (12, 20), (20, 30), (30, 50), (50, 76), (76, 106)]
     width, held = IC._plateau(pieces3, [0.5, 210.0, 150.0, 96.0, 9.0, 50.0], xb, 1.0, True, 4)
     assert held and width == pytest.approx(5.75)
+
+
+# --------------------------------------------------------------------------------------------
+# current only: readings that contradict each other are refused, not returned (branch cur-silent)
+# --------------------------------------------------------------------------------------------
+def _zoo_reading(seed: int):
+    """The current reading of a zoo sweep as identify makes it (and the sweep's case)."""
+    from hystcli.current import condition
+    from hystcli.identify.current import read_current
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(seed, tip=False)
+    run = parse_run(case.record.csv_text(), source="z")
+    chk = check_sweep(run, 1, need_current=True)
+    q = np.asarray(run["q1"], float)
+    c = condition(np.asarray(run["c1"], float), run.sample_rate, 20.0)
+    return case, run, read_current(q, c, np.asarray(run["t"], float), chk)
+
+
+@pytest.mark.parametrize("seed, name", [(2796, "d_neg"), (2010, "d_pos")])
+def test_current_only_refuses_an_edge_whose_dead_zone_is_a_curve(seed, name):
+    # design seeds: 2796 (pretension) took a kink between two loaded slopes (15.8 and 28.8 mA/deg)
+    # for the negative edge, 3.4 deg out; 2010 (stiffening) read the positive edge where a soft
+    # take-up bends most, 1.0 deg late. On each the piece before the kink climbs at a fifth of
+    # the loaded slope or more and several times the other side's dead zone: no dead zone
+    case, run, reading = _zoo_reading(seed)
+    assert name in reading.doubts and name[2:] not in reading.edges
+    assert "times the other side's dead zone" in reading.doubts[name]
+    with pytest.raises(IdentificationError, match="never clearly shows the"):
+        identify(run, use_tip=False)
+
+
+@pytest.mark.parametrize("seed", [1042])
+def test_current_only_keeps_an_edge_whose_dead_zone_tilts_less_than_a_fifth_of_its_loading(seed):
+    # 1042: its positive dead-zone piece is 5.9x the negative one's but only 0.165 of the loaded
+    # slope (DEAD_SHARE 0.2): still read, within 0.6 deg
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(seed, tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    truth = case.truth.as_dict()
+    for name, value in fit.model.params().items():
+        if name in fit.stderr:
+            assert abs(value - truth[name]) <= 1.0, name

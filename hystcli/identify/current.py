@@ -42,6 +42,22 @@ ELASTIC_TOP = 2.0
 at the top of the stroke (a wall, a stiffening cable), so a steep fall after the reversal is that
 load coming back, not the sheath friction flipping over the backlash."""
 
+DEAD_SHARE = 0.2
+"""A "dead zone" before a loading edge that climbs at this share of the loaded slope after it or more
+is a candidate for not being the dead zone at all (:data:`DEAD_TILT` decides)."""
+
+DEAD_TILT = 3.0
+"""An edge whose dead-zone piece is this many times steeper (``|dC/dq|``) than the other side's, and
+at least :data:`DEAD_SHARE` of its own loaded slope, is read on a curve, not at a kink: both sides
+cross the same dead zone, where no tendon is taut, and its slope (pretensioned springs, the motor's
+viscous term) is the same magnitude both ways (design seeds 0-2999: on the records identify returned,
+edges with a dead-zone piece at 0.15 of the loaded slope or more had the two sides within a factor of
+1.9 of each other, save one at 5.9 and 0.165 of its loaded slope, right within 0.6 deg; the five
+records past both thresholds, all stiffening take-ups or an unloading tail on one side, were 1.0 to
+3.5 deg off: 302, 1584, 2010, 2796, 2936; on 3000-4999, checked after, no silent failure is
+caught and one record right within 0.4 deg is refused, 4288, at 0.24 and 19x). The kink then sits where the curve bends most, which
+depends on its shape, not on where the tendon was taken up: the edge is refused."""
+
 
 @dataclass(frozen=True)
 class Stretch:
@@ -118,6 +134,10 @@ class CurrentReading:
         Sides (``"pos"``/``"neg"``) whose edge only the record's first stretch shows: it starts
         from a state the current cannot tell (with the tip held low on its plateau the tendon
         takes up the load further out than the edge), so the edge is an estimate, not a reading.
+    doubts : dict
+        ``"d_pos"``/``"d_neg"`` -> why the reading leaves that edge out
+        although some stretch showed it (readings that contradict each other): it is missing from
+        :attr:`edges`, so the current does not fix it (:data:`DEAD_TILT`).
     """
 
     edges: dict = field(default_factory=dict)
@@ -131,6 +151,7 @@ class CurrentReading:
     noise: float = math.nan
     stretches: tuple = ()
     first_only: tuple = ()
+    doubts: dict = field(default_factory=dict)
 
     @property
     def no_load_level(self) -> float:
@@ -310,6 +331,9 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     # the reading's resolution: the typical bin width (deg) of the stretches read
     resolution = float(np.median([s.resolution for s in stretches])) if stretches else 0.5
     first_only: list[str] = []
+    doubts: dict[str, str] = {}
+    # per side, the edge readings kept: the dead-zone piece's |dC/dq| and the loaded slope at them
+    tilt: dict[str, tuple[float, float]] = {}
     # the no-load current, roughly: the median level at which the stretches from a reversal saw
     # a tendon taken up, both ways (a kink read where a held load starts to unload sits far
     # from it, on the loaded side)
@@ -350,6 +374,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             # how the current law rounds the corner (filtering, a stiffening cable, the law itself)
             edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size), 0.5 * resolution)
             levels[d] = float(np.median([k.level for k in ks]))
+            tilt[side] = (float(np.median([abs(k.before) for k in ks])), float(np.median([k.after for k in ks])))
         # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
         # complete branches (reversal to reversal) first: a stretch cut by the record's end is
         # read on less travel
@@ -384,6 +409,21 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             backlash_se["pos" if d > 0 else "neg"] = max(
                 float(1.2533 * np.std(arr, ddof=1) / math.sqrt(arr.size)) if arr.size > 1 else 0.0,
                 0.5 * float(np.ptp(arr)), 0.1 if arr.size > 1 else 0.3, 0.5 * resolution)
+    # both sides cross the same dead zone (no tendon taut): its slope is the same magnitude both
+    # ways. A side whose piece before the jump is several times steeper than the other side's,
+    # and a fair share of its own loaded slope, read its kink on a curve (a stiffening take-up, an
+    # unloading tail running into the loading): where that curve bends most is no edge
+    for side, other in (("pos", "neg"), ("neg", "pos")):
+        if side in tilt and other in tilt:
+            (dz, up), (dz_other, _) = tilt[side], tilt[other]
+            if dz >= DEAD_SHARE * up and dz >= DEAD_TILT * dz_other:
+                doubts[f"d_{side}"] = (f"before the kink at {edges[side]:.2f} deg the current already climbs at "
+                                       f"{dz:.3g} per deg ({dz / up:.0%} of the loaded slope), {dz / max(dz_other, 1e-12):.1f} "
+                                       "times the other side's dead zone: a curve, not the edge")
+    for name in doubts:
+        if name.startswith("d_"):
+            edges.pop(name[2:], None)
+            edges_se.pop(name[2:], None)
     arrivals = {}
     for d in (1, -1):
         arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])
@@ -395,4 +435,5 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     return CurrentReading(edges=edges, edges_se=edges_se, backlash=backlash, backlash_se=backlash_se,
                           arrivals=arrivals, no_load=levels, loaded_slope=float(np.median(loaded)) if loaded else math.nan,
                           dead_slope=float(np.median(dead)) if dead else math.nan, noise=noise,
-                          stretches=tuple(stretches), first_only=tuple(s for s in first_only if s in edges))
+                          stretches=tuple(stretches), first_only=tuple(s for s in first_only if s in edges),
+                          doubts=doubts)
