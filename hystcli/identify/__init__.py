@@ -363,6 +363,11 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
     sides = {"pos": "positive", "neg": "negative"}
     missing_edges = [s for s in ("pos", "neg") if reading is None or s not in reading.edges]
     if missing_edges:
+        doubt = None if reading is None else reading.doubts.get(f"d_{missing_edges[0]}")
+        if doubt:
+            # the stretches showed an edge, but one the record contradicts: say why it is not used
+            raise IdentificationError(f"{where_k}: the current's d_{missing_edges[0]} is not an edge ({doubt}): "
+                                      "sweep a straight shaft with less pretension, or record the tip angle")
         side = sides[missing_edges[0]]
         raise IdentificationError(
             f"{where_k}: the motor current never clearly shows the {side} tendon taken up (no jump in "
