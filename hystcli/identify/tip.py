@@ -705,6 +705,12 @@ def _slides_unseen(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | 
 WALL_BAND = 3.0
 """Samples within this many noise sigmas of a wall's level count as held by it."""
 
+WALL_HOLD = 2.0
+"""The censoring threshold lies this many noise sigmas inside the wall's typical level: about 2 % of
+the samples the wall holds fall below it (a few hundredths of a degree off, as noise), while the
+free tip approaching the wall stays free up to it (at 3 sigmas, design seed 763 of
+``hystcli.zoo.plants``, noise 0.3 deg, censored a degree of free approach and was refused)."""
+
 WALL_TRAVEL = (0.5, 5.0)
 """A wall needs at least ``max(WALL_TRAVEL[0] deg, WALL_TRAVEL[1] sigma)`` of advancing knob at the
 tip's extreme level on one stroke. A free loop (slope omega >= 0.8 deg/deg up to its reversal)
@@ -760,7 +766,7 @@ def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None
         # the censoring threshold from the wall's typical level, not its noisy peak: from the peak,
         # a few percent of the samples held at the wall fall below it and count as free tip
         wall = float(np.median(sign * y[near])) if travel >= need else math.nan
-        out.append(sign * (wall - WALL_BAND * sigma) if travel >= need else None)
+        out.append(sign * (wall - WALL_HOLD * sigma) if travel >= need else None)
     return out[0], out[1]
 
 
