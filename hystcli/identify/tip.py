@@ -105,81 +105,24 @@ def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
 
 
 @njit(cache=True)
-def _batch_kernel(q, y, wt, cands, out):
+def _batch_kernel(q, y, wt, side, lvl, cands, out):
     # SSE after the best (h_mid, omega >= 1e-3) of every candidate geometry, best of three
     # initial states (at the ascending envelope, the descending one, midway); sample weights
     # wt are 1, or 0 for a sample at a wall (censored: the recursion runs through it, the fit
-    # does not see it)
+    # does not see it). With side[i] +1 (held at a top wall) or -1 (a bottom one), the squared
+    # shortfall of the candidate's free tip from the wall's censoring level lvl[i] is added
+    # (the wall says the free loop reaches it; (h_mid, omega) stay the free samples' least
+    # squares); side all zero: the plain SSE.
     n = 0.0
     syy = 0.0
     sy = 0.0
+    walls = False
     for i in range(q.shape[0]):
         n += wt[i]
         sy += wt[i] * y[i]
         syy += wt[i] * y[i] * y[i]
-    for m in range(cands.shape[0]):
-        dn = cands[m, 0]
-        dp = cands[m, 1]
-        bp = cands[m, 2]
-        bn = cands[m, 3]
-        dh = cands[m, 4]
-        dhp = dn + bn - dh
-        dhn = dp - bp + dh
-        half = 0.5 * dh
-        u0 = q[0]
-        lo0 = -half + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
-        hi0 = half + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
-        best = 1e300
-        for s in range(3):
-            if s == 0:
-                z = lo0
-            elif s == 1:
-                z = hi0
-            else:
-                z = 0.5 * (lo0 + hi0)
-            sz = 0.0
-            szz = 0.0
-            szy = 0.0
-            for i in range(q.shape[0]):
-                u = q[i]
-                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-                if z < lo:
-                    z = lo
-                if z > hi:
-                    z = hi
-                sz += wt[i] * z
-                szz += wt[i] * z * z
-                szy += wt[i] * z * y[i]
-            den = n * szz - sz * sz
-            if den > 1e-12 * n * n:
-                w = (n * szy - sz * sy) / den
-            else:
-                w = 1e-3
-            if w < 1e-3:
-                w = 1e-3
-            a = (sy - w * sz) / n
-            sse = syy - 2.0 * a * sy - 2.0 * w * szy + n * a * a + 2.0 * a * w * sz + w * w * szz
-            if sse < best:
-                best = sse
-        out[m] = best
-
-
-@njit(cache=True)
-def _batch_censored_kernel(q, y, wt, side, lvl, cands, out):
-    # _batch_kernel's SSE plus, for each sample at a wall (side +1: held at the top level y,
-    # -1: at the bottom), the squared shortfall of the candidate's free tip from the wall's
-    # censoring level lvl: the
-    # wall says the free loop reaches it. The (h_mid, omega) are the free samples' least squares,
-    # as in _batch_kernel; a candidate whose free loop stays short of the wall where the tip sits
-    # at it is ranked by how far short.
-    n = 0.0
-    syy = 0.0
-    sy = 0.0
-    for i in range(q.shape[0]):
-        n += wt[i]
-        sy += wt[i] * y[i]
-        syy += wt[i] * y[i] * y[i]
+        if side[i] != 0.0:
+            walls = True
     for m in range(cands.shape[0]):
         dn = cands[m, 0]
         dp = cands[m, 1]
@@ -224,21 +167,20 @@ def _batch_censored_kernel(q, y, wt, side, lvl, cands, out):
                 w = 1e-3
             a = (sy - w * sz) / n
             sse = syy - 2.0 * a * sy - 2.0 * w * szy + n * a * a + 2.0 * a * w * sz + w * w * szz
-            if sse >= best:
-                continue
-            z = z0
-            for i in range(q.shape[0]):
-                u = q[i]
-                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-                if z < lo:
-                    z = lo
-                if z > hi:
-                    z = hi
-                if side[i] != 0.0:
-                    short = side[i] * (lvl[i] - (a + w * z))
-                    if short > 0.0:
-                        sse += short * short
+            if walls and sse < best:
+                z = z0
+                for i in range(q.shape[0]):
+                    u = q[i]
+                    lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+                    hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+                    if z < lo:
+                        z = lo
+                    if z > hi:
+                        z = hi
+                    if side[i] != 0.0:
+                        short = side[i] * (lvl[i] - (a + w * z))
+                        if short > 0.0:
+                            sse += short * short
             if sse < best:
                 best = sse
         out[m] = best
@@ -607,7 +549,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
 
     cands = _candidates(q_min, q_max)
     sse = np.empty(cands.shape[0])
-    _batch_kernel(qs, ys, np.ones(qs.size) if free_s is None else free_s.astype(float), cands, sse)
+    zeros = np.zeros(qs.size)
+    _batch_kernel(qs, ys, np.ones(qs.size) if free_s is None else free_s.astype(float), zeros, zeros, cands, sse)
     best_geometries = _distinct_best(cands, sse, N_STARTS, span)
     if cs is not None:
         # at a wall, also the best candidates whose free loop reaches the wall where the tip sits
@@ -617,7 +560,7 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
         side = cs[0].astype(float) - cs[2].astype(float)
         lvl = np.where(cs[0], cs[1] if cs[1] is not None else 0.0, cs[3] if cs[3] is not None else 0.0)
         sse_w = np.empty(cands.shape[0])
-        _batch_censored_kernel(qs, ys, free_s.astype(float), side, lvl, cands, sse_w)
+        _batch_kernel(qs, ys, free_s.astype(float), side, lvl, cands, sse_w)
         best_geometries += [g for g in _distinct_best(cands, sse_w, N_STARTS, span)
                             if not any(np.array_equal(g, h) for h in best_geometries)]
     thetas = [_start_from_geometry(g, qs, ys, free_s) for g in best_geometries]
