@@ -87,6 +87,18 @@ _THETA = ("d_neg", "width", "f_pos", "f_neg", "delta", "omega", "h_mid", "z_init
 # --------------------------------------------------------------------------------------------
 # compiled kernels
 # --------------------------------------------------------------------------------------------
+@njit(cache=True, inline="always")
+def _clamp(z, u, dn, dp, dhp, dhn, half):
+    # one step of the clamp recursion (DESIGN.md section 3): z held unless an envelope at u pushes it
+    lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
+    hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+    if z < lo:
+        z = lo
+    if z > hi:
+        z = hi
+    return z
+
+
 @njit(cache=True)
 def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
     dhp = dn + bn - dh
@@ -95,12 +107,7 @@ def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
     z = z_init
     for i in range(q.shape[0]):
         u = q[i]
-        lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-        hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-        if z < lo:
-            z = lo
-        if z > hi:
-            z = hi
+        z = _clamp(z, u, dn, dp, dhp, dhn, half)
         out[i] = z
 
 
@@ -149,12 +156,7 @@ def _batch_kernel(q, y, wt, side, lvl, cands, out):
             szy = 0.0
             for i in range(q.shape[0]):
                 u = q[i]
-                lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-                hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-                if z < lo:
-                    z = lo
-                if z > hi:
-                    z = hi
+                z = _clamp(z, u, dn, dp, dhp, dhn, half)
                 sz += wt[i] * z
                 szz += wt[i] * z * z
                 szy += wt[i] * z * y[i]
@@ -171,12 +173,7 @@ def _batch_kernel(q, y, wt, side, lvl, cands, out):
                 z = z0
                 for i in range(q.shape[0]):
                     u = q[i]
-                    lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-                    hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-                    if z < lo:
-                        z = lo
-                    if z > hi:
-                        z = hi
+                    z = _clamp(z, u, dn, dp, dhp, dhn, half)
                     if side[i] != 0.0:
                         short = side[i] * (lvl[i] - (a + w * z))
                         if short > 0.0:
