@@ -350,8 +350,9 @@ def test_plot_identification_writes_a_png(tmp_path):
 # 427-2769: walls the tip meets within a degree or so of the knob's reversal (0.5-1.4 deg of
 # advancing knob at the wall); before they were not seen as walls (the travel floor was 1.5 deg,
 # and a noisy sample out of the band split a stroke's stretch in two) and the plain fits returned
-# d/b 0.5-1.2 deg off with exit 0.
-WALL_SEEDS = (7, 32, 33, 39, 124, 161, 179, 292, 427, 527, 1563, 1846, 2769)
+# d/b 0.5-1.2 deg off with exit 0. 669 and 775: noisy trackers (0.4 deg on 669), 1.5-2 deg of knob
+# at the wall, under the former 5 sigmas of travel.
+WALL_SEEDS = (7, 32, 33, 39, 124, 161, 179, 292, 427, 527, 669, 775, 1563, 1846, 2769)
 
 
 @pytest.mark.parametrize("seed", WALL_SEEDS)
