@@ -114,6 +114,11 @@ RESERVE_STEPS = 12
 :func:`hystcli.current.loading_edge`'s ``strict_flat`` and ``select``) before it is taken, unless
 the search can go no further first; the reading identification makes finds most edges sooner."""
 
+TAUT_FLAT_READINGS = 2
+"""Fewest readings of a kink's flat stretch off the no-load band on the side of the tendon behind
+for that flat to be the tendon unloading, not a dead zone (:meth:`_Search._flat_taut_behind`):
+two, so one outlier does not decide."""
+
 LOAD = "load"
 ACCEPT, READY, WAIT, DOUBT, REFUSE = "accept", "ready", "wait", "doubt", "refuse"
 
@@ -842,6 +847,12 @@ class _Search:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
                             f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
                             "tendon still taut on its backlash plateau, the rise its unloading")
+        taut = self._flat_taut_behind(kink)
+        if taut is not None:
+            return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg starts at {taut:.1f} mA, off the no-load "
+                            f"band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: the current "
+                            "is moving back toward its no-load level, that tendon unloading, and the kink is where "
+                            "its unloading steepens, not an edge")
         placed = self._placed(kink, plateau)
         if placed is not None:
             return placed
@@ -859,6 +870,37 @@ class _Search:
         if last > band_wide + (-lvl if -lvl > band_wide else 0.0):
             return ACCEPT, ""
         return READY, ""
+
+    def _flat_taut_behind(self, kink) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
+        """The first reading of a kink's flat stretch when :data:`TAUT_FLAT_READINGS` or more of
+        its readings lie off the no-load band on the side of the tendon behind (the band
+        :meth:`_taut_side` reads a taut start by) and the kink itself lies back inside it, else
+        None.
+
+        A dead zone's flat lies in the no-load band along its whole length: no tendon is taut
+        there. A flat that begins taut on the side of the tendon behind and runs on in one line
+        (no kink between) is that tendon still unloading, the current moving back toward its
+        no-load level (a load-following current on the tip's backlash plateau, a pretensioned
+        tendon easing off), and the kink at its end is where the unloading steepens (the tip
+        leaving its plateau), whatever the level at the kink itself: the identification's band
+        is wide where its sweep was (design seed 1304 of ``bench/zoo.py``: the flat from a taut
+        start at 208 mA, 48 mA past the band, ran 20 deg to a kink at 126 mA inside it; the kink
+        gave an offset 12 deg off). The segment's first reading is left out (a stiction burst
+        may sit there)."""
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        before = c[self.dir * (q - kink.at) < 0]
+        if kink.n_before <= 0 or before.size == 0:
+            return None
+        flat = before[-kink.n_before:]
+        if flat.size == before.size:
+            flat = flat[1:]
+        behind = [float(v) for v in flat if self._taut_side(float(v)) == -self.dir]
+        # a flat wholly off the band is a level of its own (a dead zone whose no-load level lies
+        # off the sweep's, or the plateau :meth:`_judge_rest` reads apart): only a flat whose own
+        # line carries it from the taut side into the band is the current moving back
+        if len(behind) < TAUT_FLAT_READINGS or self._taut_side(float(kink.level)) == -self.dir:
+            return None
+        return behind[0]
 
     def _one_line_through(self, kink, c0: float) -> bool:  # noqa: ANN001
         """Whether the readings past ``kink`` keep one slope (within a quarter) on either side of
