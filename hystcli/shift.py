@@ -847,7 +847,7 @@ class _Search:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
                             f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
                             "tendon still taut on its backlash plateau, the rise its unloading")
-        taut = self._flat_taut_behind(kink)
+        taut = self._flat_taut_behind(kink, noise)
         if taut is not None:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg starts at {taut:.1f} mA, off the no-load "
                             f"band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: the current "
@@ -871,15 +871,17 @@ class _Search:
             return ACCEPT, ""
         return READY, ""
 
-    def _flat_taut_behind(self, kink) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
+    def _flat_taut_behind(self, kink, noise: float) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
         """The first reading of a kink's flat stretch when :data:`TAUT_FLAT_READINGS` or more of
-        its readings lie off the no-load band on the side of the tendon behind (the band
-        :meth:`_taut_side` reads a taut start by) and the kink itself lies back inside it, else
-        None.
+        its readings lie clearly off the no-load band on the side of the tendon behind (the band
+        :meth:`_taut_side` reads a taut start by, widened by four times the readings' noise and
+        :data:`MAX_OFFSET_SE` deg of the loaded slope) and the kink itself lies back inside it,
+        else None.
 
         A dead zone's flat lies in the no-load band along its whole length: no tendon is taut
-        there. A flat that begins taut on the side of the tendon behind and runs on in one line
-        (no kink between) is that tendon still unloading, the current moving back toward its
+        there. A flat that begins taut on the side of the tendon behind, where the readings
+        begin, and runs on in one line (no arrival at a dead zone between) is that tendon still
+        unloading, the current moving back toward its
         no-load level (a load-following current on the tip's backlash plateau, a pretensioned
         tendon easing off), and the kink at its end is where the unloading steepens (the tip
         leaving its plateau), whatever the level at the kink itself: the identification's band
@@ -891,10 +893,26 @@ class _Search:
         before = c[self.dir * (q - kink.at) < 0]
         if kink.n_before <= 0 or before.size == 0:
             return None
+        # the flat must run from where the readings begin (the segment's first reading aside): a
+        # flat that begins after a steeper stretch begins where an unloading arrived at the dead
+        # zone, and a dead zone whose level lies off the sweep's (the replay's speed, its viscous
+        # friction) begins off the band as well (design seeds 522, 1522, 2497: right offsets from
+        # such flats, up to 6 mA past the band)
+        if kink.n_before < before.size - 1:
+            return None
         flat = before[-kink.n_before:]
         if flat.size == before.size:
             flat = flat[1:]
-        behind = [float(v) for v in flat if self._taut_side(float(v)) == -self.dir]
+        # clearly off the band only: by four times the readings' noise and by MAX_OFFSET_SE deg of
+        # the loaded slope (a reading just past the band's edge is the band's own looseness)
+        c0, band = self.th.no_load(self.dir, self.moving)
+        if c0 is None:
+            return None
+        if self.margin is not None:
+            band = self.margin
+        noise = noise if math.isfinite(noise) else self.th.noise
+        clear = band + max(4.0 * noise, MAX_OFFSET_SE * max(kink.after, 0.0))
+        behind = [float(v) for v in flat if -self.dir * (float(v) - c0) > clear]
         # a flat wholly off the band is a level of its own (a dead zone whose no-load level lies
         # off the sweep's, or the plateau :meth:`_judge_rest` reads apart): only a flat whose own
         # line carries it from the taut side into the band is the current moving back
