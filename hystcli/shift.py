@@ -864,6 +864,14 @@ class _Search:
         # tendon would need the no-load level to lie further out still, and to be unloading yet.
         if last <= band_own + (-lvl if -lvl > band_own else 0.0):
             return WAIT, ""
+        # a flat beyond the whole band on the side of the tendon behind: the no-load level may be
+        # either direction's (the sweep's two lie apart by its Coulomb friction, or by a load it
+        # misread as one); an unloading ends at the true one, so the current must run past the
+        # farther of the two as well before the rise is a tendon taken up
+        if -lvl > band_wide and self.th.no_load_rising is not None and self.th.no_load_falling is not None:
+            far = max(self.dir * (self.th.no_load_rising - c0), self.dir * (self.th.no_load_falling - c0), 0.0)
+            if last <= band_own + far + (-lvl):
+                return WAIT, ""
         # the identification's band is read on a whole sweep and is wide where that sweep was
         # noisy, walled or unloading on its dead-zone stretch; the kink's own band is enough when
         # the search can go no further
