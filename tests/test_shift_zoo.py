@@ -36,3 +36,21 @@ def test_a_taut_start_whose_current_runs_back_into_the_no_load_band_is_no_edge()
         pytest.fail("the edge at -32.35 deg is readable (the replay goes to -66 deg)")
     assert r.edge == "neg" and r.start_outside
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_held_load_whose_unloading_runs_through_a_misread_no_load_level_is_no_edge():
+    # design seed 3533 (a tip-load plant; the sweep could not be identified, so the model is the
+    # true loop with the current levels read on the sweep, which put the no-load level moving
+    # down at 356 mA and moving up at 84, the true one): the knob rests with the positive tendon
+    # taut, its load held on the backlash plateau (435 mA) to -18.3 deg; it then unloads at
+    # 56 mA/deg in one line through 356 mA toward 84. The rise was taken for the negative
+    # tendon's edge: an offset of -2.88 deg where the true shift is -15.73. The true edge,
+    # -31.5 deg, lies at the travel limit (31.1 deg): a refusal is the right answer.
+    case = plants.replay_case(3533)
+    model, _ = straight_model(case)
+    rep = parse_run(case.replay.csv_text(), source="replay-3533")
+    try:
+        r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
+    except ShiftDetectionError:
+        return
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
