@@ -114,6 +114,11 @@ RESERVE_STEPS = 12
 :func:`hystcli.current.loading_edge`'s ``strict_flat`` and ``select``) before it is taken, unless
 the search can go no further first; the reading identification makes finds most edges sooner."""
 
+TAUT_FLAT_READINGS = 2
+"""Fewest readings of a kink's flat stretch off the no-load band on the side of the tendon behind
+for that flat to be the tendon unloading, not a dead zone (:meth:`_Search._flat_taut_behind`):
+two, so one outlier does not decide."""
+
 LOAD = "load"
 ACCEPT, READY, WAIT, DOUBT, REFUSE = "accept", "ready", "wait", "doubt", "refuse"
 
@@ -842,6 +847,12 @@ class _Search:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
                             f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
                             "tendon still taut on its backlash plateau, the rise its unloading")
+        taut = self._flat_taut_behind(kink, noise)
+        if taut is not None:
+            return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg starts at {taut:.1f} mA, off the no-load "
+                            f"band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: the current "
+                            "is moving back toward its no-load level, that tendon unloading, and the kink is where "
+                            "its unloading steepens, not an edge")
         placed = self._placed(kink, plateau)
         if placed is not None:
             return placed
@@ -853,12 +864,69 @@ class _Search:
         # tendon would need the no-load level to lie further out still, and to be unloading yet.
         if last <= band_own + (-lvl if -lvl > band_own else 0.0):
             return WAIT, ""
+        # a flat beyond the whole band on the side of the tendon behind: the no-load level may be
+        # either direction's (the sweep's two lie apart by its Coulomb friction, or by a load it
+        # misread as one); an unloading ends at the true one, so the current must run past the
+        # farther of the two as well before the rise is a tendon taken up
+        if -lvl > band_wide and self.th.no_load_rising is not None and self.th.no_load_falling is not None:
+            far = max(self.dir * (self.th.no_load_rising - c0), self.dir * (self.th.no_load_falling - c0), 0.0)
+            if last <= band_own + far + (-lvl):
+                return WAIT, ""
         # the identification's band is read on a whole sweep and is wide where that sweep was
         # noisy, walled or unloading on its dead-zone stretch; the kink's own band is enough when
         # the search can go no further
         if last > band_wide + (-lvl if -lvl > band_wide else 0.0):
             return ACCEPT, ""
         return READY, ""
+
+    def _flat_taut_behind(self, kink, noise: float) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
+        """The first reading of a kink's flat stretch when :data:`TAUT_FLAT_READINGS` or more of
+        its readings lie clearly off the no-load band on the side of the tendon behind (the band
+        :meth:`_taut_side` reads a taut start by, widened by four times the readings' noise and
+        :data:`MAX_OFFSET_SE` deg of the loaded slope) and the kink itself lies back inside it,
+        else None.
+
+        A dead zone's flat lies in the no-load band along its whole length: no tendon is taut
+        there. A flat that begins taut on the side of the tendon behind, where the readings
+        begin, and runs on in one line (no arrival at a dead zone between) is that tendon still
+        unloading, the current moving back toward its
+        no-load level (a load-following current on the tip's backlash plateau, a pretensioned
+        tendon easing off), and the kink at its end is where the unloading steepens (the tip
+        leaving its plateau), whatever the level at the kink itself: the identification's band
+        is wide where its sweep was (design seed 1304 of ``bench/zoo.py``: the flat from a taut
+        start at 208 mA, 48 mA past the band, ran 20 deg to a kink at 126 mA inside it; the kink
+        gave an offset 12 deg off). The segment's first reading is left out (a stiction burst
+        may sit there)."""
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        before = c[self.dir * (q - kink.at) < 0]
+        if kink.n_before <= 0 or before.size == 0:
+            return None
+        # the flat must run from where the readings begin (the segment's first reading aside): a
+        # flat that begins after a steeper stretch begins where an unloading arrived at the dead
+        # zone, and a dead zone whose level lies off the sweep's (the replay's speed, its viscous
+        # friction) begins off the band as well (design seeds 522, 1522, 2497: right offsets from
+        # such flats, up to 6 mA past the band)
+        if kink.n_before < before.size - 1:
+            return None
+        flat = before[-kink.n_before:]
+        if flat.size == before.size:
+            flat = flat[1:]
+        # clearly off the band only: by four times the readings' noise and by MAX_OFFSET_SE deg of
+        # the loaded slope (a reading just past the band's edge is the band's own looseness)
+        c0, band = self.th.no_load(self.dir, self.moving)
+        if c0 is None:
+            return None
+        if self.margin is not None:
+            band = self.margin
+        noise = noise if math.isfinite(noise) else self.th.noise
+        clear = band + max(4.0 * noise, MAX_OFFSET_SE * max(kink.after, 0.0))
+        behind = [float(v) for v in flat if -self.dir * (float(v) - c0) > clear]
+        # a flat wholly off the band is a level of its own (a dead zone whose no-load level lies
+        # off the sweep's, or the plateau :meth:`_judge_rest` reads apart): only a flat whose own
+        # line carries it from the taut side into the band is the current moving back
+        if len(behind) < TAUT_FLAT_READINGS or self._taut_side(float(kink.level)) == -self.dir:
+            return None
+        return behind[0]
 
     def _one_line_through(self, kink, c0: float) -> bool:  # noqa: ANN001
         """Whether the readings past ``kink`` keep one slope (within a quarter) on either side of

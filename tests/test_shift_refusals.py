@@ -404,3 +404,62 @@ def test_the_tail_of_an_unloading_is_not_merged_into_the_dead_zone():
         assert k is not None, seed
         assert k.at == pytest.approx(24.0, abs=0.15), seed
         assert k.residual < 2.0 * 1.5 and k.se < 0.1, seed
+
+
+# --------------------------------------------------------------------------------------------
+# a taut start whose current runs back into the no-load band before it steepens
+# --------------------------------------------------------------------------------------------
+def test_a_flat_that_runs_from_the_taut_side_into_the_no_load_band_is_an_unloading():
+    # (design seed 1304 of bench/zoo.py, by hand.) The true dead zone is [-12, 2] (the straight
+    # [-5, 9] shifted by -7) and the true no-load level 100 mA; the sweep's identification says
+    # 120 (114 moving down, 126 up): a band of 120 +- 13.5 mA read at rest. The knob rests at 0
+    # with the positive tendon taut: its current eases off at 2.5 mA/deg from 145 mA (off the
+    # band) to 130 at -6 (inside it), then the tip leaves its backlash plateau and the tendon
+    # unloads at 8 mA/deg down to the true no-load level at -9.75; the dead zone is flat to -12,
+    # where the negative tendon loads at 4 mA/deg. The kink at -6 rises (loading-positive) out
+    # of a gentle stretch and the current then runs past the sweep's band: taken, it gives an
+    # offset of -6 - (-5) = -1, 6 deg off. Its flat began on the positive tendon's taut side and
+    # ran into the band in one line: the current moving back toward its no-load level, a
+    # tendon unloading. The edge at -12 gives the offset, -7.
+    def law(q: float, d: float) -> float:
+        pos = 145.0 + 2.5 * q if q >= -6.0 else max(130.0 - 8.0 * (-6.0 - q), 100.0)
+        return pos - 4.0 * max(-12.0 - q, 0.0)
+
+    for seed in range(6):
+        try:
+            r = detect_shift(model(), Knob(law, seed=seed), 1, direction=-1)
+        except ShiftDetectionError:
+            continue
+        assert r.offset == pytest.approx(-7.0, abs=0.5), seed
+    r = detect_shift(model(), Knob(law, seed=0), 1, direction=-1)
+    assert r.edge == "neg" and r.start_outside and r.offset == pytest.approx(-7.0, abs=0.25)
+
+
+def test_a_held_load_beyond_the_band_must_run_past_both_no_load_levels():
+    # (design seed 3533 of bench/zoo.py, by hand.) Readings taken moving (a replay). The sweep's
+    # identification put the no-load level moving down at 160 mA and moving up at 90 (the true
+    # one, for both: the sweep misread a held load as Coulomb friction). The true dead zone is
+    # [-14, 0] (the straight [-5, 9] shifted by -9). The knob rests at 0 with the positive
+    # tendon taut, its load held on the tip's backlash plateau (180 mA) to -3.5, where it
+    # unloads at 12 mA/deg in one line through the sweep's 160 down to the true 90 (at -11),
+    # flat to -14, where the negative tendon loads at 4 mA/deg. The rise out of the held flat
+    # runs in one line through 160 mA and on past it as far as the flat sat beyond it: taken,
+    # an offset of -3.5 - (-5) = +1.5, 10.5 deg off. Until it has run past the other direction's
+    # level (90) as well, it may be an unloading; it flattens there, and the edge at -14 gives
+    # the offset, -9.
+    class Moving(Knob):
+        reads_moving = True
+
+    def law(q: float, d: float) -> float:
+        pos = 180.0 if q >= -3.5 else max(180.0 - 12.0 * (-3.5 - q), 90.0)
+        return pos - 4.0 * max(-14.0 - q, 0.0)
+
+    m = model(current_dead_zone=125.0, no_load_rising=90.0, no_load_falling=160.0)
+    for seed in range(6):
+        try:
+            r = detect_shift(m, Moving(law, seed=seed), 1, direction=-1)
+        except ShiftDetectionError:
+            continue
+        assert r.offset == pytest.approx(-9.0, abs=0.5), seed
+    r = detect_shift(m, Moving(law, seed=0), 1, direction=-1)
+    assert r.edge == "neg" and r.offset == pytest.approx(-9.0, abs=0.25)
