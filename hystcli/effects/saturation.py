@@ -31,14 +31,35 @@ import numpy as np
 from .base import EffectType, Form
 
 _INF = math.inf
-_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 20), [math.inf]])
+_STEP = (400.0 / 20.0) ** (1.0 / 19.0)
+"""The limit grid's ratio (17 %): a smooth flattening's SSE is a smooth function of its limit,
+which the sub-grid vertex reads between these points."""
+_LIMITS = np.concatenate([20.0 * _STEP ** np.arange(20), [math.inf]])
+_HARD_LIMITS = np.concatenate([20.0 * _STEP ** (np.arange(58) / 3.0), [math.inf]])
+"""A hard stop's grid (5.4 %, a third of the smooth forms' step, their points included): a stop's
+SSE has a kink where the stop meets the largest free tip, no vertex to read between coarse
+points, and every clipped sample shows the stop's level to the grid's step (a contact wall's
+grid is 5 deg: a stop must be placed as finely to be told from it)."""
+
+
+def _ratios(step: float, n: int) -> np.ndarray:
+    """Knob 2's ratio axis of a ``-knobs`` form: integer powers of its limit grid's ``step``
+    (0.5-2), so that every knob-2 limit it makes (limit x knob2) is a point of the one-limit
+    form's grid. On a ratio axis of its own step the product would set knob 2's limit more
+    finely than the one-limit form can, and where the runs see only knob 2 at its limit (knob 1's
+    then free) that finer placement, not the data, would earn the extra parameter and leave knob
+    1's limit wherever it fell: off, on a run that drives knob 1 past it. Commensurate, the
+    one-limit form fits those runs as well with one parameter less, and BIC keeps it: a
+    catheter's two sections are alike unless the data show them different."""
+    return step ** np.arange(-n, n + 1, dtype=float)
 
 
 def _form(name: str, summary: str, second: str | None = None) -> Form:
     """A saturation form; ``second`` names a ratio parameter (the negative side's limit for
     ``asymmetric``, knob 2's for the ``-knobs`` forms)."""
     params, units = ("limit",), ("deg",)
-    typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": _LIMITS}
+    limits = _HARD_LIMITS if name.startswith("hard") else _LIMITS
+    typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": limits}
     if second:
         params, units = params + (second,), units + ("1",)
         typical, bounds, domain = ({**typical, second: 1.0}, {**bounds, second: (0.25, 4.0)},
@@ -46,10 +67,11 @@ def _form(name: str, summary: str, second: str | None = None) -> Form:
         if second == "ratio":
             axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 10), [math.inf]]),
                     second: np.geomspace(0.4, 2.5, 5)}
+        elif name.startswith("hard"):
+            # knob 2's limit on the hard grid, in steps of two of its points (11 %)
+            axes = {"limit": limits, second: _ratios(_STEP ** (2.0 / 3.0), 6)}
         else:
-            # a hard stop is seen to within the grid step on every clipped sample: the knobs'
-            # limits need the one-limit forms' step (17 %), their ratio a step of about 12 %
-            axes = {"limit": _LIMITS, second: np.geomspace(0.5, 2.0, 13)}
+            axes = {"limit": limits, second: _ratios(_STEP, 4)}
     return Form(name, "output", 0, params, units, "limit", _INF, typical, bounds, domain, axes, summary)
 
 
