@@ -43,14 +43,15 @@ grid is 5 deg: a stop must be placed as finely to be told from it)."""
 
 
 def _ratios(step: float, n: int) -> np.ndarray:
-    """Knob 2's ratio axis of a ``-knobs`` form: integer powers of its limit grid's ``step``
-    (0.5-2), so that every knob-2 limit it makes (limit x knob2) is a point of the one-limit
-    form's grid. On a ratio axis of its own step the product would set knob 2's limit more
-    finely than the one-limit form can, and where the runs see only knob 2 at its limit (knob 1's
-    then free) that finer placement, not the data, would earn the extra parameter and leave knob
-    1's limit wherever it fell: off, on a run that drives knob 1 past it. Commensurate, the
-    one-limit form fits those runs as well with one parameter less, and BIC keeps it: a
-    catheter's two sections are alike unless the data show them different."""
+    """Knob 2's ratio axis of ``hard-knobs``: integer powers of its limit grid's ``step``
+    (0.5-2), so that every knob-2 limit it makes (limit x knob2) is a point of ``hard``'s grid.
+    A stop is invisible below it: where the runs take only knob 2 to its stop, knob 1's limit
+    is free above knob 1's largest tip. On a ratio axis of its own step the product would set
+    knob 2's stop more finely than ``hard`` can, and that finer placement, not the data, would
+    earn the extra parameter and leave knob 1's stop wherever the lattice put it (off, for a run
+    that drives knob 1 past it). Commensurate, ``hard`` fits those runs as well with one
+    parameter less and BIC keeps it: a catheter's two sections are alike unless the data show
+    them different."""
     return step ** np.arange(-n, n + 1, dtype=float)
 
 
@@ -71,7 +72,9 @@ def _form(name: str, summary: str, second: str | None = None) -> Form:
             # knob 2's limit on the hard grid, in steps of two of its points (11 %)
             axes = {"limit": limits, second: _ratios(_STEP ** (2.0 / 3.0), 6)}
         else:
-            axes = {"limit": limits, second: _ratios(_STEP, 4)}
+            # a smooth flattening bends every sample, far below its limit too: each knob's limit
+            # is seen wherever that knob moves, and its ratio keeps a step of its own (12 %)
+            axes = {"limit": limits, second: np.geomspace(0.5, 2.0, 13)}
     return Form(name, "output", 0, params, units, "limit", _INF, typical, bounds, domain, axes, summary)
 
 
