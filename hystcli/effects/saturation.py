@@ -34,8 +34,8 @@ _INF = math.inf
 _STEP = (400.0 / 20.0) ** (1.0 / 19.0)
 """The limit grid's ratio (17 %): a smooth flattening's SSE is a smooth function of its limit,
 which the sub-grid vertex reads between these points."""
-_LIMITS = np.concatenate([20.0 * _STEP ** np.arange(20), [math.inf]])
-_HARD_LIMITS = np.concatenate([20.0 * _STEP ** (np.arange(58) / 3.0), [math.inf]])
+_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 20), [math.inf]])
+_HARD_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 58), [math.inf]])
 """A hard stop's grid (5.4 %, a third of the smooth forms' step, their points included): a stop's
 SSE has a kink where the stop meets the largest free tip, no vertex to read between coarse
 points, and every clipped sample shows the stop's level to the grid's step (a contact wall's
