@@ -12,6 +12,9 @@ asymmetric  limit * tanh(y_h / limit) for y_h >= 0, and                 limit = 
 smooth-     smooth, with knob 2's section flattening towards            limit = inf
 knobs       +-knob2*limit (each knob bends its own section or plane)
 hard-knobs  hard, knob 2's section stopping at +-knob2*limit             limit = inf
+knee        y_h up to +-limit, beyond it limit + slope*(|y_h| - limit)  limit = inf
+            (a second, stiffer spring engages: the section keeps
+            bending, slower)
 ==========  =========================================================  =========================
 
 The ``-knobs`` forms exist because the two knobs of a 2-DoF catheter bend different sections (or
@@ -19,8 +22,11 @@ the same section in two planes, with different tendon moment arms and wall stiff
 makes their largest bends equal, and one limit shared by both knobs must compromise between them,
 where a one-sided ``contact`` wall fits one of them exactly and wins.
 
+A ``knee`` is not a stop: past it every sample shows the slope, and a run driven farther than the
+training runs is predicted to keep bending at it, where ``hard`` would hold it at the knee.
+
 Compensation inverts the map; targets beyond 99.9 % of a smooth limit (or beyond a hard one)
-cannot be reached and are clipped there, with a warning.
+cannot be reached and are clipped there, with a warning; a knee's map is inverted exactly.
 """
 from __future__ import annotations
 
@@ -59,8 +65,15 @@ def _form(name: str, summary: str, second: str | None = None) -> Form:
     """A saturation form; ``second`` names a ratio parameter (the negative side's limit for
     ``asymmetric``, knob 2's for the ``-knobs`` forms)."""
     params, units = ("limit",), ("deg",)
-    limits = _HARD_LIMITS if name.startswith("hard") else _LIMITS
+    limits = _HARD_LIMITS if name.startswith("hard") or name == "knee" else _LIMITS
     typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": limits}
+    if second == "slope":
+        # the knee's place is seen to the grid's step as a stop's is; its slope (0: a stop, 1: no
+        # knee) in quarter steps
+        return Form(name, "output", 0, ("limit", "slope"), ("deg", "1"), "limit", _INF,
+                    {**typical, "slope": 0.5}, {**bounds, "slope": (0.05, 0.95)},
+                    {**domain, "slope": (1e-3, 1.0)}, {"limit": limits, "slope": np.array([0.25, 0.5, 0.75])},
+                    summary)
     if second:
         params, units = params + (second,), units + ("1",)
         typical, bounds, domain = ({**typical, second: 1.0}, {**bounds, second: (0.25, 4.0)},
@@ -89,6 +102,7 @@ class Saturation(EffectType):
         _form("asymmetric", "the tip flattens towards +limit and -ratio*limit", "ratio"),
         _form("smooth-knobs", "each knob's section flattens towards its own limit (knob 2: knob2*limit)", "knob2"),
         _form("hard-knobs", "each knob's section stops at its own limit (knob 2: knob2*limit)", "knob2"),
+        _form("knee", "past +-limit the tip bends at slope times the rate (a stiffer second stage)", "slope"),
     )
 
     @staticmethod
@@ -105,8 +119,16 @@ class Saturation(EffectType):
     def _hard(eff) -> bool:
         return eff.form.startswith("hard")
 
+    @staticmethod
+    def _knee(z, lim: float, slope: float):
+        """The knee's map (``slope``) or its inverse (``1/slope``), arrays or floats."""
+        a = np.abs(z)
+        return np.where(a > lim, np.sign(z) * (lim + slope * (a - lim)), z)
+
     def forward(self, eff, z, sig, state):
         lim, neg = self._limits(eff, sig.k)
+        if eff.form == "knee":
+            return self._knee(z, lim, eff["slope"])
         if self._hard(eff):
             return np.clip(z, -lim, lim)
         if eff.form == "asymmetric":
@@ -115,6 +137,8 @@ class Saturation(EffectType):
 
     def at_rest(self, eff, y, sig):
         lim, neg = self._limits(eff, sig.k)
+        if eff.form == "knee":
+            return float(self._knee(y, lim, 1.0 / eff["slope"]))
         if self._hard(eff):
             return min(max(y, -lim), lim)
         if eff.form == "asymmetric" and y < 0.0:
@@ -125,6 +149,8 @@ class Saturation(EffectType):
     def inverse(self, eff, z, sig, state, warnings, options):
         k = sig.k
         lim, neg = self._limits(eff, k)
+        if eff.form == "knee":
+            return self._knee(z, lim, 1.0 / eff["slope"])
         if self._hard(eff):
             if np.any(np.abs(z) > lim):
                 warnings.append(f"knob {k}: the reference passes the saturation limit {lim:g} deg: clipped there")
@@ -151,6 +177,12 @@ class Saturation(EffectType):
                 said.append(True)
                 warnings.append(text)
 
+        if eff.form == "knee":
+            inv_slope = 1.0 / eff["slope"]
+
+            def knee(z, other):
+                return z if abs(z) <= lim else math.copysign(lim + inv_slope * (abs(z) - lim), z)
+            return StatelessStep(knee)
         if self._hard(eff):
             def inv(z, other):
                 if z > lim or z < -lim:
