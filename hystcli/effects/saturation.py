@@ -65,11 +65,12 @@ def _form(name: str, summary: str, second: str | None = None) -> Form:
     """A saturation form; ``second`` names a ratio parameter (the negative side's limit for
     ``asymmetric``, knob 2's for the ``-knobs`` forms)."""
     params, units = ("limit",), ("deg",)
-    limits = _HARD_LIMITS if name.startswith("hard") or name == "knee" else _LIMITS
+    limits = _HARD_LIMITS if name.startswith("hard") else _LIMITS
     typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": limits}
     if second == "slope":
-        # the knee's place is seen to the grid's step as a stop's is; its slope (0: a stop, 1: no
-        # knee) in quarter steps
+        # the smooth forms' limit grid (17 %: a knee's misplacement costs only 1 - slope of a
+        # stop's; on the stops' finer grid it would beat the two-parameter asymmetric form by its
+        # spacing), the slope (0: a stop, 1: no knee) in quarter steps
         return Form(name, "output", 0, ("limit", "slope"), ("deg", "1"), "limit", _INF,
                     {**typical, "slope": 0.5}, {**bounds, "slope": (0.05, 0.95)},
                     {**domain, "slope": (1e-3, 1.0)}, {"limit": limits, "slope": np.array([0.25, 0.5, 0.75])},
