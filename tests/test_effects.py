@@ -308,6 +308,25 @@ def test_saturation_stiffens_near_the_largest_bend():
     assert np.allclose(sat[small], base[small], atol=2e-3)  # near straight, barely changed
 
 
+def test_saturation_hard_knobs_grid_sets_knob2_stops_on_the_hard_grid():
+    # every knob-2 limit hard-knobs' grid makes (limit x knob2) is a limit of hard's: the extra
+    # parameter cannot place knob 2's stop more finely
+    etype = E.EFFECTS["saturation"]
+    for two, one in (("hard-knobs", "hard"),):
+        f, g = etype.get_form(two), etype.get_form(one)
+        lims = np.log(g.axes["limit"][np.isfinite(g.axes["limit"])])
+        assert np.any(f.axes["knob2"] == 1.0)
+        assert f.axes["knob2"].min() <= 0.6 and f.axes["knob2"].max() >= 1.6
+        for L in f.axes["limit"][np.isfinite(f.axes["limit"])]:
+            for r in f.axes["knob2"]:
+                v = math.log(L * r)
+                if lims[0] <= v <= lims[-1]:
+                    assert np.min(np.abs(lims - v)) < 1e-9, (two, L, r)
+    # a hard stop's limit is placed as finely as a contact wall (5 deg at 80 deg)
+    hard = etype.get_form("hard").axes["limit"]
+    assert np.max(np.diff(np.log(hard[np.isfinite(hard)]))) < math.log(1.06)
+
+
 def test_saturation_knobs_forms_give_each_knob_its_own_limit():
     t, r = twin.periodic(fs=100.0)
     q = {1: r, 2: 0.9 * r}

@@ -30,6 +30,7 @@ ON = {("saturation", "smooth"): {"limit": 400.0}, ("saturation", "hard"): {"limi
       ("saturation", "asymmetric"): {"limit": 400.0, "ratio": 1.5}, ("contact", "wall"): {"wall": 300.0},
       ("saturation", "smooth-knobs"): {"limit": 400.0, "knob2": 0.8},
       ("saturation", "hard-knobs"): {"limit": 400.0, "knob2": 0.8},
+      ("saturation", "knee"): {"limit": 400.0, "slope": 0.5},
       ("stretch", "stiffening"): {"compliance": 3.0, "reference": 10.0, "stiffening": 1.0},
       ("friction", "capstan"): {"mu": 0.2}, ("friction", "backlash"): {"mu": 0.2}, ("friction", "slope"): {"mu": 0.2},
       ("deadzone", "width"): {"width": 2.0}, ("deadzone", "centre"): {"shift": 1.5}}

@@ -12,6 +12,9 @@ asymmetric  limit * tanh(y_h / limit) for y_h >= 0, and                 limit = 
 smooth-     smooth, with knob 2's section flattening towards            limit = inf
 knobs       +-knob2*limit (each knob bends its own section or plane)
 hard-knobs  hard, knob 2's section stopping at +-knob2*limit             limit = inf
+knee        y_h up to +-limit, beyond it limit + slope*(|y_h| - limit)  limit = inf
+            (a second, stiffer spring engages: the section keeps
+            bending, slower)
 ==========  =========================================================  =========================
 
 The ``-knobs`` forms exist because the two knobs of a 2-DoF catheter bend different sections (or
@@ -19,8 +22,11 @@ the same section in two planes, with different tendon moment arms and wall stiff
 makes their largest bends equal, and one limit shared by both knobs must compromise between them,
 where a one-sided ``contact`` wall fits one of them exactly and wins.
 
+A ``knee`` is not a stop: past it every sample shows the slope, and a run driven farther than the
+training runs is predicted to keep bending at it, where ``hard`` would hold it at the knee.
+
 Compensation inverts the map; targets beyond 99.9 % of a smooth limit (or beyond a hard one)
-cannot be reached and are clipped there, with a warning.
+cannot be reached and are clipped there, with a warning; a knee's map is inverted exactly.
 """
 from __future__ import annotations
 
@@ -31,14 +37,44 @@ import numpy as np
 from .base import EffectType, Form
 
 _INF = math.inf
+_STEP = (400.0 / 20.0) ** (1.0 / 19.0)
+"""The limit grid's ratio (17 %): a smooth flattening's SSE is a smooth function of its limit,
+which the sub-grid vertex reads between these points."""
 _LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 20), [math.inf]])
+_HARD_LIMITS = np.concatenate([np.geomspace(20.0, 400.0, 58), [math.inf]])
+"""A hard stop's grid (5.4 %, a third of the smooth forms' step, their points included): a stop's
+SSE has a kink where the stop meets the largest free tip, no vertex to read between coarse
+points, and every clipped sample shows the stop's level to the grid's step (a contact wall's
+grid is 5 deg: a stop must be placed as finely to be told from it)."""
+
+
+def _ratios(step: float, n: int) -> np.ndarray:
+    """Knob 2's ratio axis of ``hard-knobs``: integer powers of its limit grid's ``step``
+    (0.5-2), so that every knob-2 limit it makes (limit x knob2) is a point of ``hard``'s grid.
+    A stop is invisible below it: where the runs take only knob 2 to its stop, knob 1's limit
+    is free above knob 1's largest tip. On a ratio axis of its own step the product would set
+    knob 2's stop more finely than ``hard`` can, and that finer placement, not the data, would
+    earn the extra parameter and leave knob 1's stop wherever the lattice put it (off, for a run
+    that drives knob 1 past it). Commensurate, ``hard`` fits those runs as well with one
+    parameter less and BIC keeps it: a catheter's two sections are alike unless the data show
+    them different."""
+    return step ** np.arange(-n, n + 1, dtype=float)
 
 
 def _form(name: str, summary: str, second: str | None = None) -> Form:
     """A saturation form; ``second`` names a ratio parameter (the negative side's limit for
     ``asymmetric``, knob 2's for the ``-knobs`` forms)."""
     params, units = ("limit",), ("deg",)
-    typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": _LIMITS}
+    limits = _HARD_LIMITS if name.startswith("hard") else _LIMITS
+    typical, bounds, domain, axes = {"limit": 80.0}, {"limit": (20.0, 400.0)}, {"limit": (1e-6, _INF)}, {"limit": limits}
+    if second == "slope":
+        # the smooth forms' limit grid (17 %: a knee's misplacement costs only 1 - slope of a
+        # stop's; on the stops' finer grid it would beat the two-parameter asymmetric form by its
+        # spacing), the slope (0: a stop, 1: no knee) in quarter steps
+        return Form(name, "output", 0, ("limit", "slope"), ("deg", "1"), "limit", _INF,
+                    {**typical, "slope": 0.5}, {**bounds, "slope": (0.05, 0.95)},
+                    {**domain, "slope": (1e-3, 1.0)}, {"limit": limits, "slope": np.array([0.25, 0.5, 0.75])},
+                    summary)
     if second:
         params, units = params + (second,), units + ("1",)
         typical, bounds, domain = ({**typical, second: 1.0}, {**bounds, second: (0.25, 4.0)},
@@ -46,10 +82,13 @@ def _form(name: str, summary: str, second: str | None = None) -> Form:
         if second == "ratio":
             axes = {"limit": np.concatenate([np.geomspace(20.0, 400.0, 10), [math.inf]]),
                     second: np.geomspace(0.4, 2.5, 5)}
+        elif name.startswith("hard"):
+            # knob 2's limit on the hard grid, in steps of two of its points (11 %)
+            axes = {"limit": limits, second: _ratios(_STEP ** (2.0 / 3.0), 6)}
         else:
-            # a hard stop is seen to within the grid step on every clipped sample: the knobs'
-            # limits need the one-limit forms' step (17 %), their ratio a step of about 12 %
-            axes = {"limit": _LIMITS, second: np.geomspace(0.5, 2.0, 13)}
+            # a smooth flattening bends every sample, far below its limit too: each knob's limit
+            # is seen wherever that knob moves, and its ratio keeps a step of its own (12 %)
+            axes = {"limit": limits, second: np.geomspace(0.5, 2.0, 13)}
     return Form(name, "output", 0, params, units, "limit", _INF, typical, bounds, domain, axes, summary)
 
 
@@ -64,6 +103,7 @@ class Saturation(EffectType):
         _form("asymmetric", "the tip flattens towards +limit and -ratio*limit", "ratio"),
         _form("smooth-knobs", "each knob's section flattens towards its own limit (knob 2: knob2*limit)", "knob2"),
         _form("hard-knobs", "each knob's section stops at its own limit (knob 2: knob2*limit)", "knob2"),
+        _form("knee", "past +-limit the tip bends at slope times the rate (a stiffer second stage)", "slope"),
     )
 
     @staticmethod
@@ -80,8 +120,16 @@ class Saturation(EffectType):
     def _hard(eff) -> bool:
         return eff.form.startswith("hard")
 
+    @staticmethod
+    def _knee(z, lim: float, slope: float):
+        """The knee's map (``slope``) or its inverse (``1/slope``), arrays or floats."""
+        a = np.abs(z)
+        return np.where(a > lim, np.sign(z) * (lim + slope * (a - lim)), z)
+
     def forward(self, eff, z, sig, state):
         lim, neg = self._limits(eff, sig.k)
+        if eff.form == "knee":
+            return self._knee(z, lim, eff["slope"])
         if self._hard(eff):
             return np.clip(z, -lim, lim)
         if eff.form == "asymmetric":
@@ -90,6 +138,8 @@ class Saturation(EffectType):
 
     def at_rest(self, eff, y, sig):
         lim, neg = self._limits(eff, sig.k)
+        if eff.form == "knee":
+            return float(self._knee(y, lim, 1.0 / eff["slope"]))
         if self._hard(eff):
             return min(max(y, -lim), lim)
         if eff.form == "asymmetric" and y < 0.0:
@@ -100,6 +150,8 @@ class Saturation(EffectType):
     def inverse(self, eff, z, sig, state, warnings, options):
         k = sig.k
         lim, neg = self._limits(eff, k)
+        if eff.form == "knee":
+            return self._knee(z, lim, 1.0 / eff["slope"])
         if self._hard(eff):
             if np.any(np.abs(z) > lim):
                 warnings.append(f"knob {k}: the reference passes the saturation limit {lim:g} deg: clipped there")
@@ -126,6 +178,12 @@ class Saturation(EffectType):
                 said.append(True)
                 warnings.append(text)
 
+        if eff.form == "knee":
+            inv_slope = 1.0 / eff["slope"]
+
+            def knee(z, other):
+                return z if abs(z) <= lim else math.copysign(lim + inv_slope * (abs(z) - lim), z)
+            return StatelessStep(knee)
         if self._hard(eff):
             def inv(z, other):
                 if z > lim or z < -lim:
