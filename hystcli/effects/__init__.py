@@ -17,7 +17,7 @@ coupling    the other knob moves this knob's loop                    input, outp
 rate        viscous lag of the tip behind the knob                   input, input2, output, output2,
                                                                      backlash
 saturation  the bending section stiffens near its largest bend       smooth, hard, asymmetric,
-                                                                     smooth-knobs, hard-knobs
+                                                                     smooth-knobs, hard-knobs, knee
 creep       slow relaxation: a fraction of each move arrives late    relax
 contact     the tip meets a wall                                     wall
 latency     the tracker reports the tip late                         tracker
