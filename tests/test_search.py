@@ -65,24 +65,31 @@ def test_a_wall_keeps_its_side():
     assert S.side_bounds(g, "gain", 0.05) == (-0.5, 0.5)  # its grid holds 0: free to cross
 
 
+def _saturation_pick(effect, specs):
+    """Sine runs ``(knob, amplitude, seed)`` of the twin with one saturation ``effect``; the grid
+    point the first three pick (the fourth held out), with the family's grid, table and base SSE."""
+    def run(k, amp, seed):
+        q = {1: np.zeros_like(T), 2: np.zeros_like(T)}
+        q[k] = amp * np.sin(2 * np.pi * 0.05 * T)
+        return twin.simulate(CAT, T, q, shape=Shape.parse("straight"), seed=seed, meta={"trial": seed},
+                             effects=(effect,))
+    preps = [S.prepare(BASE, run(*sp), f"r{i}", True) for i, sp in enumerate(specs)]
+    etype = E.EFFECTS["saturation"]
+    grid = S.family_grid(etype)
+    base = np.array([p.sse(()) for p in preps])
+    T_ = S.table(preps, (), base, etype, grid)
+    ks, acts, nd = S.fit_counts(etype, grid), S.acting(preps, etype, grid), S.null_distance(etype, grid)
+    j, _ = S.pick(T_, np.array([1.0, 1.0, 1.0, 0.0]), np.array([float(p.n) for p in preps]), ks, acts, nd)
+    return grid, j, T_, base
+
+
 def test_a_knob_limit_no_training_run_reaches_is_the_other_knobs():
     # a hard stop at 80 deg on both knobs; the training runs take only knob 2 past it (knob 1
     # stays at 70): knob 1's own limit is not seen, and the pick must not leave it where a grid
     # happened to place knob 2's finely (the -knobs form at knob 1 = 113): the held-out run,
     # knob 1 driven to 186 deg of free tip, is clipped at the stop the one-limit form found
-    def run(k, amp, seed):
-        q = {1: np.zeros_like(T), 2: np.zeros_like(T)}
-        q[k] = amp * np.sin(2 * np.pi * 0.05 * T)
-        return twin.simulate(CAT, T, q, shape=Shape.parse("straight"), seed=seed, meta={"trial": seed},
-                             effects=(E.make_effect("saturation", "hard", limit=80.1),))
-    runs = [run(2, 140.0, 1), run(1, 60.0, 2), run(2, 90.0, 3), run(1, 140.0, 4)]
-    preps = [S.prepare(BASE, r, f"r{i}", True) for i, r in enumerate(runs)]
-    etype = E.EFFECTS["saturation"]
-    grid = S.family_grid(etype)
-    base = np.array([p.sse(()) for p in preps])
-    T_ = S.table(preps, (), base, etype, grid)
-    j, _ = S.pick(T_, np.array([1.0, 1.0, 1.0, 0.0]), np.array([float(p.n) for p in preps]),
-                  S.fit_counts(etype, grid), S.acting(preps, etype, grid), S.null_distance(etype, grid))
+    grid, j, T_, base = _saturation_pick(E.make_effect("saturation", "hard", limit=80.1),
+                                         [(2, 140.0, 1), (1, 60.0, 2), (2, 90.0, 3), (1, 140.0, 4)])
     assert grid[j].form == "hard"
     assert abs(grid[j].params["limit"] - 80.1) < 0.06 * 80.1
     assert T_[3, j] < 0.01 * base[3]
@@ -91,19 +98,8 @@ def test_a_knob_limit_no_training_run_reaches_is_the_other_knobs():
 def test_a_knee_is_picked_as_a_knee_and_keeps_bending_past_the_training_runs():
     # a second, stiffer stage past 60 deg (slope 0.5) on both knobs; the training runs go 30 deg
     # past the knee, the held-out run three times as far: a stop at the knee would hold it there
-    def run(k, amp, seed):
-        q = {1: np.zeros_like(T), 2: np.zeros_like(T)}
-        q[k] = amp * np.sin(2 * np.pi * 0.05 * T)
-        return twin.simulate(CAT, T, q, shape=Shape.parse("straight"), seed=seed, meta={"trial": seed},
-                             effects=(E.make_effect("saturation", "knee", limit=60.0, slope=0.5),))
-    runs = [run(1, 70.0, 1), run(2, 70.0, 2), run(1, 40.0, 3), run(2, 140.0, 4)]
-    preps = [S.prepare(BASE, r, f"r{i}", True) for i, r in enumerate(runs)]
-    etype = E.EFFECTS["saturation"]
-    grid = S.family_grid(etype)
-    base = np.array([p.sse(()) for p in preps])
-    T_ = S.table(preps, (), base, etype, grid)
-    ks, acts, nd = S.fit_counts(etype, grid), S.acting(preps, etype, grid), S.null_distance(etype, grid)
-    j, _ = S.pick(T_, np.array([1.0, 1.0, 1.0, 0.0]), np.array([float(p.n) for p in preps]), ks, acts, nd)
+    grid, j, T_, base = _saturation_pick(E.make_effect("saturation", "knee", limit=60.0, slope=0.5),
+                                         [(1, 70.0, 1), (2, 70.0, 2), (1, 40.0, 3), (2, 140.0, 4)])
     assert grid[j].form == "knee" and grid[j].params["slope"] == 0.5
     stops = [i for i, g in enumerate(grid) if g.form.startswith("hard") and g.effect is not None]
     assert T_[3, j] < 0.05 * base[3]
