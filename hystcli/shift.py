@@ -748,6 +748,17 @@ class _Search:
             return REFUSE, why
         return self._judge_rest(kink, noise, span_before)
 
+    def _before_kink(self, kink) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - hystcli.current.Kink
+        """The segment's readings before ``kink``, and the kink's flat among them (its last
+        ``n_before``, or the last one), less the segment's first reading when the flat runs from it
+        and holds more than that one (a stiction burst may sit there)."""
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        before = c[self.dir * (q - kink.at) < 0]
+        flat = before[-kink.n_before:] if kink.n_before > 0 else before[-1:]
+        if flat.size > 1 and flat.size == before.size:
+            flat = flat[1:]
+        return before, flat
+
     def _flat_on_no_load(self, kink, noise: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
         """Whether a kink's few readings before it are the dead zone's by their level: on the
         stretch from where a slack search began (no taut start, turn or contact), the kink's level
@@ -761,15 +772,11 @@ class _Search:
         if c0 is None:
             return False
         _, _, band_own = self._level_bands(kink, noise)
-        q, c = np.array(self.seg_q), np.array(self.seg_c)
-        before = c[self.dir * (q - kink.at) < 0]
+        before, own = self._before_kink(kink)
         if before.size == 0 or kink.after <= 0:
             return False
-        own = before[-kink.n_before:] if kink.n_before > 0 else before[-1:]
         if before.size > 1:
             before = before[1:]
-        if own.size > 1 and own.size == c[self.dir * (q - kink.at) < 0].size:
-            own = own[1:]
         # the few readings' own slope is loose: the edge where the loaded line meets the mean
         # level of the kink's flat readings (a dead zone's flat) must agree with the fitted kink
         # to MAX_OFFSET_SE
@@ -897,8 +904,7 @@ class _Search:
         start at 208 mA, 48 mA past the band, ran 20 deg to a kink at 126 mA inside it; the kink
         gave an offset 12 deg off). The segment's first reading is left out (a stiction burst
         may sit there)."""
-        q, c = np.array(self.seg_q), np.array(self.seg_c)
-        before = c[self.dir * (q - kink.at) < 0]
+        before, flat = self._before_kink(kink)
         if kink.n_before <= 0 or before.size == 0:
             return None
         # the flat must run from where the readings begin (the segment's first reading aside): a
@@ -908,9 +914,6 @@ class _Search:
         # such flats, up to 6 mA past the band)
         if kink.n_before < before.size - 1:
             return None
-        flat = before[-kink.n_before:]
-        if flat.size == before.size:
-            flat = flat[1:]
         # clearly off the band only: by four times the readings' noise and by MAX_OFFSET_SE deg of
         # the loaded slope (a reading just past the band's edge is the band's own looseness)
         c0, band = self.th.no_load(self.dir, self.moving)

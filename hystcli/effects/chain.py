@@ -238,9 +238,10 @@ def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: C
             if moves is not None:
                 c["dp"] = moves[0] if c["dp"] is None else c["dp"] + moves[0]
                 c["dn"] = moves[1] if c["dn"] is None else c["dn"] + moves[1]
-            if e.type.widening(e):
+            w = e.type.widening(e)
+            if w:
                 sig.need_t(e.name)   # the speed it widens with needs the time column
-                c["w"] += e.type.widening(e)
+                c["w"] += w
         elif kind == "hyst":
             c["x"] = c["z"]
             if state is not None and state.y is not None:
@@ -600,9 +601,10 @@ def _hysteresis_inverse(kn: KnobModel, r: np.ndarray, plan: Plan, sig: Signals, 
         if moves is not None:
             dp = moves[0] if dp is None else dp + moves[0]
             dn = moves[1] if dn is None else dn + moves[1]
-        if e.type.widening(e):
+        w = e.type.widening(e)
+        if w:
             sig.need_t(e.name)
-            widen += e.type.widening(e)
+            widen += w
     # the hysteresis starts where the forward chain starts it: behind a straight tip reading
     # (0 unless an output stage bends the static map, e.g. a coupling that pushes the tip)
     yh0 = _rest(plan, 0.0, sig)

@@ -182,6 +182,8 @@ class Saturation(EffectType):
             inv_slope = 1.0 / eff["slope"]
 
             def knee(z, other):
+                # _knee's inverse in plain floats: called once per sample, where numpy's scalar
+                # overhead would dominate
                 return z if abs(z) <= lim else math.copysign(lim + inv_slope * (abs(z) - lim), z)
             return StatelessStep(knee)
         if self._hard(eff):

@@ -417,13 +417,10 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         if side in tilt and other in tilt:
             (dz, up), (dz_other, _) = tilt[side], tilt[other]
             if dz >= DEAD_SHARE * up and dz >= DEAD_TILT * dz_other:
-                doubts[f"d_{side}"] = (f"before the kink at {edges[side]:.2f} deg the current already climbs at "
+                doubts[f"d_{side}"] = (f"before the kink at {edges.pop(side):.2f} deg the current already climbs at "
                                        f"{dz:.3g} per deg ({dz / up:.0%} of the loaded slope), {dz / max(dz_other, 1e-12):.1f} "
                                        "times the other side's dead zone: a curve, not the edge")
-    for name in doubts:
-        if name.startswith("d_"):
-            edges.pop(name[2:], None)
-            edges_se.pop(name[2:], None)
+                edges_se.pop(side, None)
     arrivals = {}
     for d in (1, -1):
         arr = np.array([s.arrival.at for s in stretches if s.direction == d and s.arrival is not None])

@@ -707,10 +707,13 @@ def find_walls(q: np.ndarray, y: np.ndarray, noise: float) -> tuple[float | None
             a = j + int(at[0])
             if level - float(np.min(sign * ym[j:a + 1])) >= max(2.0, 6.0 * sigma):
                 travel = max(travel, float(np.ptp(q[j + at])))
+        if travel < need:
+            out.append(None)
+            continue
         # the censoring threshold from the wall's typical level, not its noisy peak: from the peak,
         # a few percent of the samples held at the wall fall below it and count as free tip
-        wall = float(np.median(sign * y[near])) if travel >= need else math.nan
-        out.append(sign * (wall - WALL_HOLD * sigma) if travel >= need else None)
+        wall = float(np.median(sign * y[near]))
+        out.append(sign * (wall - WALL_HOLD * sigma))
     return out[0], out[1]
 
 
