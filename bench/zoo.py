@@ -15,6 +15,11 @@ What counts, per case:
   applies to its fit (a loaded stretch past each edge, samples on each dead-zone flat, the tip
   leaving each backlash plateau, and no exact null direction of the true loop's Jacobian on the
   record moving it: then no method could fix it), which is the plant's truth, not our estimate.
+  For the current alone two more limits hold whatever the current law: a law that does not carry
+  the backlash cannot give it, and an edge is shown only where a stretch takes its tendon up,
+  moving through it from the dead zone with a degree to spare on each side
+  (:func:`current_cannot_fix`; a record started past an edge with the tendon taut shows only that
+  tendon unloading there, where the tip settles).
 * 2-sigma coverage: the share of returned parameters whose truth lies within two standard errors.
 
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
@@ -67,6 +72,47 @@ def truth_can_fix(case: plants.SweepCase) -> tuple[set[str], set[str]]:
     return set(unfixed), set(sliding)
 
 
+EDGE_MARGIN = 1.0
+"""Knob travel (deg) a loading stretch must run on each side of an edge for a current to show it."""
+
+
+def monotone_stretches(q: np.ndarray, dead_band: float = 0.5) -> list[tuple[int, int, int]]:
+    """(start, stop, direction) of the knob's monotone stretches: a reversal is a turn of more
+    than ``dead_band`` deg from the running extremum (the jitter of a held knob is no reversal)."""
+    out, start, d, ext, at = [], 0, 0, float(q[0]), 0
+    for i in range(1, q.size):
+        v = float(q[i])
+        if d >= 0 and v > ext or d <= 0 and v < ext:
+            ext, at = v, i
+        if d == 0 and abs(v - q[start]) > dead_band:
+            d = 1 if v > q[start] else -1
+            ext, at = v, i
+        elif d != 0 and d * (ext - v) > dead_band:
+            out.append((start, at, d))
+            start, d, ext = at, -d, v
+            at = i
+    out.append((start, q.size - 1, d if d else 1))
+    return out
+
+
+def current_cannot_fix(case: plants.SweepCase) -> set[str]:
+    """Edges a current cannot show on this record, whatever its law: a tendon is taken up (the
+    current's slope jumps) only on a stretch that moves through the edge toward it, from the
+    dead zone; a record that starts past an edge and never comes back through it loading (one
+    cycle started with the tendon taut) shows the tendon unloading there, which is where the tip
+    settles, not where the tendon is taken up. Judged on the true loop and the knob's samples."""
+    tr = case.truth
+    u = np.asarray(case.record.columns["q1"], float) - tr.offset
+    shown = set()
+    for a, b, d in monotone_stretches(u):
+        lo, hi = float(u[a:b + 1].min()), float(u[a:b + 1].max())
+        if d > 0 and lo <= tr.d_pos - EDGE_MARGIN and hi >= tr.d_pos + EDGE_MARGIN:
+            shown.add("d_pos")
+        if d < 0 and hi >= tr.d_neg + EDGE_MARGIN and lo <= tr.d_neg - EDGE_MARGIN:
+            shown.add("d_neg")
+    return {"d_pos", "d_neg"} - shown
+
+
 def bench_identify(n: int, seed: int, use_tip: bool) -> None:
     tol = 0.5 if use_tip else 1.0
     stats: dict = defaultdict(lambda: defaultdict(int))
@@ -82,6 +128,8 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
         unfixed, sliding = truth_can_fix(case)
         if not use_tip and not case.current_shows_backlash:
             unfixed |= {"b_pos", "b_neg"}
+        if not use_tip:
+            unfixed |= current_cannot_fix(case)
         try:
             fit = identify(run, use_tip=use_tip).fits[1]
         except HystError as exc:

@@ -356,6 +356,13 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
         floor = 1.2 * max(pre, FLAT_AFTER * post)
         if any(slopes[k] <= floor for k in later):
             continue
+        # nor a marked fall after it (a piece below FLAT_AFTER of the steepest between): a loaded
+        # tendon stiffens or meets a wall, it never softens back; a fall is a held load's end, or
+        # a dead zone climbing at a pretensioned tendon's slope (design seed 28: the reversal's
+        # first half-degree read as the dead zone, the held plateau as the loading, 6 against the
+        # unloading's 29 and the dead zone's 6 mA/deg)
+        if any(slopes[k] <= FLAT_AFTER * max(slopes[j + 1:k]) for k in later):
+            continue
         if pre <= best_pre:   # the flattest start; of equals the later one (the far side)
             best, best_pre = j, pre
     return best
@@ -406,6 +413,16 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
             first = k
     else:
         while first > 0 and abs(slopes[first - 1]) <= max(FLAT_AFTER * slopes[j + 1], 2.0 * abs(slopes[j])):
+            # noise splits the flat into pieces; a piece clearly steeper than the flat one (beyond
+            # three standard errors and a fifth of the jump) is a tendon unloading into the dead
+            # zone, at twice a pretensioned dead zone's slope (design seed 1: 5.0 against 2.5 and a
+            # loaded 10.1 mA/deg; in the fit it put d_pos 1.9 deg late)
+            k = first - 1
+            sxx_k, sxx_j = _sxx(x[pcs[k][0]:pcs[k][1]]), _sxx(x[pcs[j][0]:pcs[j][1]])
+            same = (sxx_k > 0 and sxx_j > 0
+                    and abs(slopes[k] - slopes[j]) <= 3.0 * sig * math.sqrt(1.0 / sxx_k + 1.0 / sxx_j))
+            if not same and abs(slopes[k] - slopes[j]) > 0.2 * (slopes[j + 1] - slopes[j]):
+                break
             first -= 1
     a0 = pcs[first][0]
     stop = x.size

@@ -59,6 +59,7 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import attribution as A
+from . import drive as D
 from . import refit as R
 from . import effects as E
 from . import search as S
@@ -399,6 +400,10 @@ def _fold_heldout(T: np.ndarray, w: np.ndarray, folds, n: np.ndarray, ks: np.nda
         wt[train] = w[train]
         j, _ = S.pick(T, wt, n, ks, acts, null_dist)
         idx, wts, x = S.subgrid(wt @ Tf, j, etype)
+        if np.any(Tf[test][:, idx[wts != 0]] >= 1e299):
+            # a neighbour the held-out runs cannot be predicted at: the interpolation's weights
+            # (one negative) would cancel its 1e300 into any SSE; the grid point itself is scored
+            idx, wts, x = np.array([j, j, j]), np.array([0.0, 1.0, 0.0]), None
         picks.append((j, x))
         total += float(max(w[test] @ (Tf[test][:, idx] @ wts), 0.0))
     return total, picks
@@ -417,12 +422,18 @@ def _n_fit(etype: EffectType, form: str, params: Mapping[str, float]) -> int:
     return len([p for p in etype.get_form(form).fit if math.isfinite(params[p])])
 
 
+def _contradicted(etype: EffectType, grid, drive: D.TipBehindCurrent) -> np.ndarray:
+    # per grid point: the side of the tendons its delay sits on, against the sweep's current
+    return np.array([D.contradicts(drive, *etype.delay_side(g.form, g.params)) for g in grid], dtype=bool)
+
+
 def _effects(fixed: Sequence[E.Effect], chosen) -> tuple[E.Effect, ...]:
     return tuple(fixed) + tuple(S.make(et, fm, p) for et, fm, p in chosen)
 
 
 def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[EffectType], max_effects: int,
-            progress: Callable[[str], None] | None = None, tables: dict | None = None, loops=None):
+            progress: Callable[[str], None] | None = None, tables: dict | None = None, loops=None,
+            drive: D.TipBehindCurrent | None = None):
     """Greedy forward selection over effect families (each family's forms form one grid).
 
     ``tables`` caches the first round's SSE tables (they do not depend on the run weights, so the
@@ -430,7 +441,10 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
     re-identified from the sweep with that effect acting (None: the model's own), for the first
     effect chosen: when it is one of those, the rounds after it and the returned knobs use its
     loop. Returns the rounds, the chosen effects, each fold's starts, the knobs (None: the
-    model's) and each fold's knobs."""
+    model's) and each fold's knobs. ``drive``: how long the sweep's tip trails its motor current
+    (:func:`hystcli.drive.tip_behind_current`); grid points whose delay it contradicts (a delay
+    in the drive the current does not show, or one after the tendons that the current shares) are
+    left out of every fit."""
     n_run = np.array([float(p.n) for p in preps])
     n_eff = float(w @ n_run)
     base_sse = np.array([p.sse(tuple(fixed)) for p in preps])
@@ -462,6 +476,10 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
                     S.table_loops(preps, base_effs, base_sse, etype, grid, lp)
                 if tables is not None and rnd == 0:
                     tables[etype.name] = T
+            if drive is not None:
+                bad = _contradicted(etype, grid, drive)
+                if bad.any():
+                    T = np.where(bad[None, :], np.inf, T)
             nd = S.null_distance(etype, grid)
             ks, acts = S.fit_counts(etype, grid), S.acting(preps, etype, grid)
             held, picks = _fold_heldout(T, w, folds, n_run, ks, acts, nd, etype)
@@ -835,7 +853,12 @@ def _loops(model: Model, sweep: Run):
                 continue
             # along a form's axis each refit starts where its neighbour ended (a continuation)
             key = g.form if etype.driver in R.DRIVERS else (g.form, g.params[g.effect.spec_form.switch] > 0)
-            kn = R.refit(sw, model, g.effect, starts=prev.get(key), cache=cache)
+            try:
+                kn = R.refit(sw, model, g.effect, starts=prev.get(key), cache=cache)
+            except ModelError:
+                # the refinement ran off to a loop no knob has (withheld design seed 90: d_pos
+                # 1.4e6 deg): no loop of its own at this grid point, which keeps the model's
+                continue
             prev[key] = kn
             out[j] = kn
         done[etype.name] = out
@@ -860,8 +883,9 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
     families = sorted((E.EFFECTS[n] for n in cands), key=lambda et: -A.score(et, follows))
     tables: dict = {}
     loops = _loops(model, sweep) if sweep is not None else None
+    drive = D.tip_behind_current(model, sweep) if sweep is not None else None
     rounds, chosen, fold_starts, knobs, fold_knobs = _select(fit, w, folds, base, families, max_effects, progress,
-                                                             tables, loops)
+                                                             tables, loops, drive)
     before_full = full
     if knobs is not None:
         # the first effect chosen came with its loop, re-identified from the sweep under it
@@ -943,7 +967,7 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
                 if bfolds:
                     break
             _, bchosen, _, _, _ = _select(before_fit, wb, bfolds, base, families, max_effects, tables=tables,
-                                          loops=loops)
+                                          loops=loops, drive=drive)
             for et, _, _ in bchosen:
                 counts[et.name] = counts.get(et.name, 0) + 1
             if chosen:

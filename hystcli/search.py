@@ -294,7 +294,10 @@ def subgrid(obj: np.ndarray, j: int, etype: EffectType) -> tuple[np.ndarray, np.
     lo, hi, names = axis_neighbours(etype)
     a, b = int(lo[j]), int(hi[j])
     idx = np.array([j, j, j])
-    if a < 0 or b < 0 or not all(np.isfinite(obj[[a, j, b]])):
+    # a neighbour no run can be predicted at (held as 1e300 by the callers) bounds nothing: a
+    # parabola through it would put the vertex anywhere, and its Lagrange weights, one of them
+    # negative, would cancel the 1e300 into any held-out SSE, zero included
+    if a < 0 or b < 0 or not all(np.isfinite(obj[[a, j, b]])) or float(np.max(obj[[a, j, b]])) >= 1e299:
         return idx, np.array([0.0, 1.0, 0.0]), None
     grid = family_grid(etype)
     p = names[j]

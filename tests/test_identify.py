@@ -641,3 +641,65 @@ def test_current_only_keeps_an_edge_whose_dead_zone_tilts_less_than_a_fifth_of_i
     for name, value in fit.model.params().items():
         if name in fit.stderr:
             assert abs(value - truth[name]) <= 1.0, name
+
+
+@pytest.mark.parametrize("seed,family", [(561, "tip-load"), (211, None), (496, None)])
+def test_current_only_reads_a_plateau_longer_than_each_unloading_piece(seed, family):
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plants (design seeds): the held load after a reversal is longer than the
+    # tendon's unloading, or than each piece the segmentation split the unloading into (561:
+    # a 12 deg plateau before 6 + 6 deg of unloading); the reading took the longest piece before
+    # the dead zone for the unloading, found the plateau itself, and refused "no backlash plateau"
+    case = plants.sweep_case(seed, tip=False)
+    assert case.current_shows_backlash and (family is None or case.family == family)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert name in fit.stderr
+        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+
+
+def test_current_only_refuses_a_plateau_many_times_its_unloading():
+    from hystcli.errors import IdentificationError
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plant (design seed 255, tip-load): after each reversal the current holds for
+    # three times the travel over which it then unloads, and the held travel is short of the
+    # backlash (10.2 deg read against b_neg 12.0): a tendon that must let go before the knob has
+    # travelled the whole backlash. A plateau more than HELD_RATIO times its unloading is not
+    # taken for the backlash: refused, not returned 1.8 deg short
+    case = plants.sweep_case(255, tip=False)
+    with pytest.raises(IdentificationError, match="cannot fix b_"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
+def test_current_only_reads_a_pretensioned_plateau_against_the_dead_zone_slope():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plant (design seed 1, pretension on a drop-at-reversal law): the pretension
+    # slope (2.5 mA/deg) is more than half the unloading's (5.0), so the plateau's tilt was
+    # judged against zero and the plateau refused; and the kink fit took the unloading piece
+    # (twice the dead zone's slope) for part of the dead zone and put d_pos 1.9 deg late
+    case = plants.sweep_case(1, tip=False)
+    assert case.family == "pretension"
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert name in fit.stderr
+        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+
+
+def test_current_only_edge_is_not_read_out_of_a_reversal_before_a_held_load():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plant (design seed 28, pretensioned drop-at-reversal law): after the bottom
+    # reversal the first half degree is flatter than the held plateau's pretension slope, so the
+    # reversal was taken for the dead zone and the plateau (6 mA/deg) for the loading, with the
+    # unloading (29) and the real dead zone (6) after it; the loading edge d_pos went unread from
+    # every stretch from a reversal and identify refused "never clearly shows the positive tendon"
+    case = plants.sweep_case(28, tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    assert abs(fit.model.d_pos - case.truth.d_pos) <= 1.0

@@ -267,6 +267,13 @@ class EffectType:
         knob-speed estimate of :data:`hystcli.effects.kernels.SPEED_TAU` (0: none)."""
         return 0.0
 
+    def delay_side(self, form: str, params: Mapping[str, float]) -> tuple[float | None, float]:
+        """Where the form puts a delay between the knob command and the tip, and how long it is:
+        ``(share, trail)``, the share of it in the drive (1: before the tendons, which the motor
+        current then shows too; 0: after them, the tip or the tracker) and the trail in seconds
+        at constant speed. ``(None, 0.0)``: the form makes no such claim (:mod:`hystcli.drive`)."""
+        return None, 0.0
+
     def at_rest(self, eff: "Effect", y: float, sig: Signals) -> float:
         """The input of an output stage that holds its output at ``y`` at rest (the hysteresis
         state behind a reading); the identity unless the stage bends the static map."""

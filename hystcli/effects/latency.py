@@ -41,6 +41,10 @@ class Latency(EffectType):
              {"delay": (0.0, _INF)}, {"delay": np.concatenate([[0.0], np.geomspace(0.01, 1.0, 25)])}, "the tracker reports the tip late"),
     )
 
+    def delay_side(self, form, params):
+        # the tracker reports late: the motor current, measured at the motor, is on time
+        return 0.0, float(params.get("delay", 0.0))
+
     def new_state(self, eff):
         return DelayState()
 

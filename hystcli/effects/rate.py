@@ -82,6 +82,15 @@ class Rate(EffectType):
     def order(eff) -> int:
         return 2 if eff.form.endswith("2") else 1
 
+    def delay_side(self, form, params):
+        # a ramp is trailed by tau per first-order stage; the input forms delay the tendons (the
+        # motor current sees it), the output forms the tip after them; the viscous backlash moves
+        # plateau ends, not the edges the current reading compares
+        if form == "backlash":
+            return None, 0.0
+        order = 2 if form.endswith("2") else 1
+        return (1.0 if form.startswith("input") else 0.0), order * float(params.get("tau", 0.0))
+
     def edges(self, eff, n, sig):
         # the dead-zone edges stay: only the plateau ends move (widening)
         return None

@@ -261,17 +261,24 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     lengths = [xb[p[1] - 1] - xb[p[0]] for p in pieces]
     ju = max(range(dead), key=lambda k: lengths[k])
     unload = slopes[ju]
-    if not unload > 0:
-        return None, False
+    if not unload > 0 or ju == 0 or (ju + 1 < dead and unload <= 0.15 * max(slopes[ju + 1:dead])):
+        # a held plateau longer than the unloading (a backlash wider than the travel the tendon
+        # unloads over, or an unloading the segmentation split) is the longest piece itself: at
+        # the reversal (ju 0), or after a lead-in (the motor's Coulomb friction flipping over a
+        # few degrees of a slow reversal), flat beside the unloading that follows it
+        return _held_plateau(pieces, slopes, lengths, xb, sig, dead)
     while ju > 0 and abs(slopes[ju - 1] - unload) < 0.4 * unload:
         ju -= 1
-    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload else 0.0
+    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload or 0.0 < slopes[dead] < unload else 0.0
+    # judged against the unloading's own share of the slope: with a pretensioned tendon the dead
+    # zone climbs at a fair share of the unloading slope (design seed 1: 2.5 against 5.0 mA/deg)
+    rel = unload - max(background, 0.0)
 
     def held(k: int) -> bool:
         # flat, or no steeper than the dead zone's own slope (a pretensioned tendon's spring, or
         # the motor's viscous term following the sine's speed, tilt the plateau the same as the
         # dead zone: the load itself does not change)
-        return min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * unload and lengths[k] >= 1.0
+        return min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * rel and lengths[k] >= 1.0
 
     # a stiffening cable unloads convexly: steepest just after the plateau, where its load is
     # largest, and the segmentation splits the unloading into pieces that soften in turn. After a
@@ -296,6 +303,54 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     if not (plateau or flip):
         return None, False
     return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]])), plateau
+
+
+HELD_LEAD = 2.0
+"""Knob travel (deg) after a reversal within which a held plateau must begin (:func:`_held_plateau`):
+an immediate drop (the sheath friction flipping over a fraction of a degree) or the motor's own
+Coulomb flip may come first; anything longer is not the backlash phase."""
+
+
+HELD_RATIO = 2.0
+"""A held plateau longer than this many times the unloading that follows it is not read as the
+backlash (:func:`_held_plateau`): a tendon whose load is held over most of its release may have let
+go before the knob travelled the whole backlash (design seed 255: the load held over three times
+the unloading travel, 10.2 deg read against a backlash of 12.0). Design seeds 0-599: at 1, 1.5 and
+2 the same silent failures (two, both older), and 1, 7 and 8 more records read right."""
+
+
+def _held_plateau(pieces, slopes, lengths, xb, sig, dead: int) -> tuple[float | None, bool]:
+    """The backlash as a held load read from the unloading back: the last flat piece (a degree or
+    more) before the dead zone, with every piece between it and the dead zone unloading.
+
+    :func:`_plateau` takes the longest piece before the dead zone for the unloading; when the
+    plateau is longer (a backlash wider than the tendon's unloading travel, or an unloading the
+    segmentation split into pieces) that reads the plateau itself as the unloading. Here the
+    unloading is what lies between the dead zone and the last held piece, its slope that of its
+    longest piece; its ends may be rounded (the 20 Hz filter), so its pieces need only be clearly
+    steeper than the plateau, not equal.
+    """
+    background = slopes[dead]
+    for k in range(dead - 2, -1, -1):
+        group = range(k + 1, dead)
+        ju = max(group, key=lambda j: lengths[j])
+        unload = slopes[ju]
+        if not unload > 0:
+            continue
+        length = xb[pieces[dead - 1][1] - 1] - xb[pieces[k + 1][0]]
+        bg = background if abs(background) <= 0.5 * unload or 0.0 < background < unload else 0.0
+        rel = unload - max(bg, 0.0)
+        flat = min(abs(slopes[k]), abs(slopes[k] - bg)) <= 0.15 * rel and lengths[k] >= 1.0
+        if not flat:
+            continue
+        steep = all(slopes[j] > 0 and min(abs(slopes[j]), abs(slopes[j] - bg)) > 0.15 * rel for j in group)
+        lead = xb[pieces[k][0]] - xb[pieces[0][0]]
+        width = float(0.5 * (xb[pieces[k][1] - 1] + xb[pieces[k + 1][0]]))
+        if steep and length >= 1.0 and unload * length > 6 * sig and lead <= HELD_LEAD \
+                and width <= HELD_RATIO * length:
+            return width, True
+        return None, False
+    return None, False
 
 
 def _dead_piece(pieces, slopes, xb, edge_piece: int | None) -> int | None:
