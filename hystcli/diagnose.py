@@ -272,6 +272,9 @@ class Diagnosis:
     bootstrap: int = 0
     left: tuple[A.Attribution, ...] = ()
     """What the residual still follows after the chosen effects (held out)."""
+    drive: D.TipBehindCurrent | None = None
+    """How long the sweep's tip trails its motor current at the edges (given a sweep with current):
+    the evidence on which side of the tendons a delay sits (:mod:`hystcli.drive`)."""
 
     @property
     def ranking(self) -> tuple[Candidate, ...]:
@@ -307,6 +310,10 @@ class Diagnosis:
                               "interval95": {p: [_r(a), _r(b)] for p, (a, b) in s.interval.items()},
                               "inclusion": s.inclusion} for s in self.selected],
                 "bootstrap": self.bootstrap,
+                "delay_side": None if self.drive is None else {
+                    "tip_behind_current_s": _r(self.drive.delay), "speed_deg_s": _r(self.drive.speed, 3),
+                    "readings": [{"knob": k, "side": sd, "tip_minus_current_deg": _r(dd, 4), "speed_deg_s": _r(v, 3)}
+                                 for k, sd, dd, v in self.drive.readings]},
             },
             "how_far": {
                 "rmse_before": _r(hf.rmse_before), "rmse_after": _r(hf.rmse_after),
@@ -998,7 +1005,7 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
         verdict += (f" Held out, {len(invalid)} run(s) ({', '.join(dict.fromkeys(invalid))}) lie outside the valid "
                     "range of the effects fitted without them and count as unchanged.")
     return Diagnosis(augmented, where, tuple(rounds), selected, how, residual, scheme, verdict,
-                     tuple(names), int(bootstrap), left)
+                     tuple(names), int(bootstrap), left, drive)
 
 
 UNEXPLAINED_PCT = 10.0

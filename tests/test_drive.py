@@ -115,3 +115,33 @@ def test_a_loop_refit_that_runs_off_keeps_the_models_loop(input_lag, monkeypatch
     d = diagnose(model, runs, sweep=sweep)
     assert d.selected and d.selected[0].name == "rate"
     assert any(c.name == "latency" for c in d.rounds[0].candidates)
+
+
+def test_the_cli_shows_where_the_delay_sits(input_lag, tmp_path):
+    # hyst diagnose RUNS --model --sweep: the report says how long the tip trails the sweep's
+    # current, in the text and in the JSON, and names the lag
+    import json
+
+    from typer.testing import CliRunner
+
+    from hystcli.cli import app
+    from hystcli.io import save_model
+
+    sweep_path = tmp_path / "sweep.csv"
+    sweep_path.write_text(input_lag.sweep)
+    _, model = _sweep_model(input_lag)
+    save_model(tmp_path / "model.json", model)
+    runs = []
+    for i, text in enumerate(input_lag.runs):
+        if i % 3 != 2:
+            runs.append(tmp_path / f"run{i}.csv")
+            runs[-1].write_text(text)
+    res = CliRunner().invoke(app, ["diagnose", *map(str, runs), "--model", str(tmp_path / "model.json"),
+                                   "--sweep", str(sweep_path), "-o", str(tmp_path / "report.json")])
+    assert res.exit_code == 0, res.output
+    assert "the sweep's motor current: the tip trails it by" in res.output
+    rep = json.loads((tmp_path / "report.json").read_text())
+    side = rep["which"]["delay_side"]
+    assert side is not None and len(side["readings"]) >= 2
+    assert abs(side["tip_behind_current_s"]) < 0.2 * input_lag.effects[0].params["tau_eq"]
+    assert rep["which"]["selected"][0]["name"] == "rate"

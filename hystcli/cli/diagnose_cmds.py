@@ -117,6 +117,11 @@ def render_table(report: dict) -> str:
     which = report["which"]
     lines += ["", f"WHICH (hold-out: {report['holdout']}; an effect joins at >= {which['min_gain_pct']:g} % "
                   "held-out RMSE shrink)"]
+    side = which.get("delay_side")
+    if side:
+        lines.append(f"  the sweep's motor current: the tip trails it by {side['tip_behind_current_s']:.3f} s at the "
+                     f"dead-zone edges ({side['speed_deg_s']:.1f} deg/s, {len(side['readings'])} edges); a delay "
+                     "form on the side of the tendons this contradicts is left out")
     for i, rd in enumerate(which["rounds"], start=1):
         base = " + ".join(rd["base"]) or "base model"
         lines.append(f"  round {i}: over {base} (held-out RMSE {rd['base_heldout_rmse']:.3f} deg)"
