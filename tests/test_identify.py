@@ -583,16 +583,18 @@ def test_a_stiffening_cables_steep_unloading_after_a_held_plateau_is_unloading_n
 
     xb = np.arange(0.0, 60.0, 0.5)
     pieces = [(0, 12), (12, 30), (30, 50), (50, 76), (76, 106)]
-    width, held = IC._plateau(pieces, [0.5, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
+    width, held, span = IC._plateau(pieces, [0.5, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
     assert held and width == pytest.approx(5.75)
+    # the two pieces either side of the end, where _refine_end places it by a two-line fit
+    assert span == (0.0, 14.5)
     # without a held plateau before it the steep piece may be the friction's flip and stays the
     # backlash phase; with neither a held plateau nor a 2x flip there is no backlash to read
-    width, held = IC._plateau(pieces, [40.0, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
-    assert width is None and not held
+    width, held, span = IC._plateau(pieces, [40.0, 126.0, 78.0, 9.0, 50.0], xb, 1.0, True, 3)
+    assert width is None and not held and span is None
     # softening in turn over three pieces (210 -> 150 -> 96, each less than twice the next): all
     # unloading, though the first is more than twice the last
     pieces3 = [(0, 12), (12, 20), (20, 30), (30, 50), (50, 76), (76, 106)]
-    width, held = IC._plateau(pieces3, [0.5, 210.0, 150.0, 96.0, 9.0, 50.0], xb, 1.0, True, 4)
+    width, held, _ = IC._plateau(pieces3, [0.5, 210.0, 150.0, 96.0, 9.0, 50.0], xb, 1.0, True, 4)
     assert held and width == pytest.approx(5.75)
 
 
@@ -703,3 +705,33 @@ def test_current_only_edge_is_not_read_out_of_a_reversal_before_a_held_load():
     case = plants.sweep_case(28, tip=False)
     fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
     assert abs(fit.model.d_pos - case.truth.d_pos) <= 1.0
+
+
+def test_the_end_of_a_held_plateau_is_placed_by_a_two_line_fit():
+    from hystcli.identify import current as IC
+
+    # binned current every 0.5 deg of travel: held at 100 mA to 7.3 deg, then unloading at
+    # 5 mA/deg (by hand: the kink of the two lines is at 7.3). The segmentation's boundary sits
+    # between bins (7.25 here); the fit finds 7.3, with a standard error below a bin
+    rng = np.random.default_rng(3)
+    xb = np.arange(0.0, 15.01, 0.5)
+    vb = 100.0 + 5.0 * np.maximum(xb - 7.3, 0.0) + rng.normal(0.0, 0.05, xb.size)
+    at, se = IC._refine_end(xb, vb, 7.25, (0.0, 15.0), 0.5)
+    assert at == pytest.approx(7.3, abs=0.05) and se is not None and se < 0.5
+    # no kink in the span: the boundary is kept, without a standard error of its own
+    flat = 100.0 + rng.normal(0.0, 0.05, xb.size)
+    at, se = IC._refine_end(xb, flat, 7.25, (0.0, 15.0), 0.5)
+    assert at == 7.25 and se is None
+
+
+def test_current_only_backlash_from_a_noisy_plateau_end_is_within_a_degree():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # independent plant (design seed 867, Coulomb-viscous, current noise 0.7 mA): the plateaus'
+    # ends read at the segmentation's boundaries put b_pos 1.7 deg and b_neg 1.2 deg off, each from
+    # one stretch, with a stated standard error of 0.3; placed by a two-line fit: within 0.6 deg
+    case = plants.sweep_case(867, tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    for name in ("b_pos", "b_neg"):
+        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
