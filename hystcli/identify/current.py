@@ -13,9 +13,11 @@ is (DESIGN.md section 4):
   :math:`D_{neg}`; the kink is then placed by :func:`hystcli.current.kink_fit` (a stiffening
   cable allowed). Pretension (a sloped dead zone) is a smaller jump, not a missing one.
 * the **backlash plateau**: after a reversal with the tendon loaded, a current that holds (a
-  flat piece, possibly after an immediate drop) before it unloads shows the backlash width
-  :math:`B`; a current that unloads at once (the tendon's stretch) does not, and the reading
-  says so rather than guess.
+  flat piece, possibly after an immediate drop; tilted as a pretensioned dead zone is) before it
+  unloads shows the backlash width :math:`B`; a current that unloads at once (the tendon's
+  stretch) does not, and the reading says so rather than guess. A plateau longer than the
+  unloading is read from the unloading back (:func:`_held_plateau`), up to :data:`HELD_RATIO`
+  times it; its end is placed by a two-line fit, like an edge (:func:`_refine_end`).
 * the **levels**: the no-load current of each direction (the motor's Coulomb friction moves it
   with the direction of motion), the loaded slope and the dead zone's slope, which Algorithm 1
   needs for its thresholds.
