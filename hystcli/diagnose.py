@@ -785,7 +785,8 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         it too, and a fast sweep turns it into a wider, steeper identified loop; so is a coupling
         driven by the other bend when the sweep moves both knobs at once. With the sweep, those candidates bring the loop
         re-identified from it with the effect acting (:mod:`hystcli.refit`), and a chosen one
-        replaces the model's loop.
+        replaces the model's loop. With the sweep's motor current, the delay forms on the side of
+        the tendons the current contradicts are left out (:mod:`hystcli.drive`).
 
     Returns
     -------

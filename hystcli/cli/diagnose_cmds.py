@@ -33,7 +33,8 @@ def diagnose_cmd(
     sweep: Annotated[Optional[Path], typer.Option(
         "--sweep", help="The model's identification sweep (t, q<k>, y<k>): a lag, latency or creep is in it too "
                         "(and a coupling when it moves both knobs), so those candidates re-identify the loop "
-                        "from it with the effect acting.")] = None,
+                        "from it with the effect acting; with its motor current (c<k>) it also tells whether "
+                        "a delay sits in the drive or after the tendons.")] = None,
     fmt: FormatOpt = OutputFormat.table,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,
