@@ -19,7 +19,9 @@ What counts, per case:
   the backlash cannot give it, and an edge is shown only where a stretch takes its tendon up,
   moving through it from the dead zone with a degree to spare on each side
   (:func:`current_cannot_fix`; a record started past an edge with the tendon taut shows only that
-  tendon unloading there, where the tip settles).
+  tendon unloading there, where the tip settles), and a backlash the plant's own current law cuts
+  short (its tendon must release over at least a quarter of the way to slack, so a backlash longer
+  than the other three quarters shows as that) is not in the current.
 * 2-sigma coverage: the share of returned parameters whose truth lies within two standard errors.
 
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
@@ -104,13 +106,34 @@ def current_cannot_fix(case: plants.SweepCase) -> set[str]:
     tr = case.truth
     u = np.asarray(case.record.columns["q1"], float) - tr.offset
     shown = set()
-    for a, b, d in monotone_stretches(u):
+    capped = set()
+    f = case.factors
+    holds = f.get("base") == "tip-load" or (f.get("base") == "drop" and f.get("drop_hold"))
+    stretches = monotone_stretches(u)
+    for i, (a, b, d) in enumerate(stretches):
         lo, hi = float(u[a:b + 1].min()), float(u[a:b + 1].max())
         if d > 0 and lo <= tr.d_pos - EDGE_MARGIN and hi >= tr.d_pos + EDGE_MARGIN:
             shown.add("d_pos")
         if d < 0 and hi >= tr.d_neg + EDGE_MARGIN and lo <= tr.d_neg - EDGE_MARGIN:
             shown.add("d_neg")
-    return {"d_pos", "d_neg"} - shown
+        # the held load after this stretch's reversal, by the plant's own law: the tendon holds
+        # its load while the knob travels b back, but must release over at least a quarter of the
+        # way down to where it is slack (plants_kernel._tendon_step); where b is longer than the
+        # other three quarters, the current's plateau is that, not b
+        if holds and i + 1 < len(stretches):
+            if d > 0 and u[b] > tr.d_pos:
+                xr, e, bb, shat, other = float(u[b]), tr.d_pos, tr.b_pos, tr.dhat_neg, tr.d_neg
+                name = "b_pos"
+            elif d < 0 and u[b] < tr.d_neg:
+                xr, e, bb, shat, other = -float(u[b]), -tr.d_neg, tr.b_neg, -tr.dhat_pos, -tr.d_pos
+                name = "b_neg"
+            else:
+                continue
+            upe = xr - bb
+            us = min(max(min(upe - f["rho"] * (xr - e), shat), other), xr)
+            if upe < us + 0.25 * (xr - us) - 1e-9:
+                capped.add(name)
+    return ({"d_pos", "d_neg"} - shown) | capped
 
 
 def bench_identify(n: int, seed: int, use_tip: bool) -> None:
