@@ -401,15 +401,15 @@ def _fold_heldout(T: np.ndarray, w: np.ndarray, folds, n: np.ndarray, ks: np.nda
     (a friction of 0.055 on a grid of 0.05 steps)."""
     total = 0.0
     picks = []
-    Tf = np.where(np.isfinite(T), T, 1e300)
+    Tf = S.finite_table(T)
     for train, test in folds:
         wt = np.zeros_like(w)
         wt[train] = w[train]
         j, _ = S.pick(T, wt, n, ks, acts, null_dist)
         idx, wts, x = S.subgrid(wt @ Tf, j, etype)
-        if np.any(Tf[test][:, idx[wts != 0]] >= 1e299):
+        if np.any(Tf[test][:, idx[wts != 0]] >= S.UNPREDICTED_AT):
             # a neighbour the held-out runs cannot be predicted at: the interpolation's weights
-            # (one negative) would cancel its 1e300 into any SSE; the grid point itself is scored
+            # (one negative) would cancel it into any SSE; the grid point itself is scored
             idx, wts, x = np.array([j, j, j]), np.array([0.0, 1.0, 0.0]), None
         picks.append((j, x))
         total += float(max(w[test] @ (Tf[test][:, idx] @ wts), 0.0))
@@ -429,9 +429,18 @@ def _n_fit(etype: EffectType, form: str, params: Mapping[str, float]) -> int:
     return len([p for p in etype.get_form(form).fit if math.isfinite(params[p])])
 
 
-def _contradicted(etype: EffectType, grid, drive: D.TipBehindCurrent) -> np.ndarray:
-    # per grid point: the side of the tendons its delay sits on, against the sweep's current
-    return np.array([D.contradicts(drive, *etype.delay_side(g.form, g.params)) for g in grid], dtype=bool)
+def _contradicted(families: Sequence[EffectType], drive: D.TipBehindCurrent | None) -> dict[str, np.ndarray]:
+    # per family with any, its grid points whose delay sits on the side of the tendons the
+    # sweep's current contradicts (fixed for the whole diagnosis: read once)
+    out: dict[str, np.ndarray] = {}
+    if drive is None:
+        return out
+    for etype in families:
+        bad = np.array([D.contradicts(drive, *etype.delay_side(g.form, g.params)) for g in S.family_grid(etype)],
+                       dtype=bool)
+        if bad.any():
+            out[etype.name] = bad
+    return out
 
 
 def _effects(fixed: Sequence[E.Effect], chosen) -> tuple[E.Effect, ...]:
@@ -440,7 +449,7 @@ def _effects(fixed: Sequence[E.Effect], chosen) -> tuple[E.Effect, ...]:
 
 def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[EffectType], max_effects: int,
             progress: Callable[[str], None] | None = None, tables: dict | None = None, loops=None,
-            drive: D.TipBehindCurrent | None = None):
+            excluded: Mapping[str, np.ndarray] | None = None):
     """Greedy forward selection over effect families (each family's forms form one grid).
 
     ``tables`` caches the first round's SSE tables (they do not depend on the run weights, so the
@@ -448,10 +457,9 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
     re-identified from the sweep with that effect acting (None: the model's own), for the first
     effect chosen: when it is one of those, the rounds after it and the returned knobs use its
     loop. Returns the rounds, the chosen effects, each fold's starts, the knobs (None: the
-    model's) and each fold's knobs. ``drive``: how long the sweep's tip trails its motor current
-    (:func:`hystcli.drive.tip_behind_current`); grid points whose delay it contradicts (a delay
-    in the drive the current does not show, or one after the tendons that the current shares) are
-    left out of every fit."""
+    model's) and each fold's knobs. ``excluded``: per family, the grid points left out of every
+    fit (:func:`_contradicted`: a delay on the side of the tendons the sweep's current
+    contradicts)."""
     n_run = np.array([float(p.n) for p in preps])
     n_eff = float(w @ n_run)
     base_sse = np.array([p.sse(tuple(fixed)) for p in preps])
@@ -483,23 +491,22 @@ def _select(preps, w, folds, fixed: Sequence[E.Effect], families: Sequence[Effec
                     S.table_loops(preps, base_effs, base_sse, etype, grid, lp)
                 if tables is not None and rnd == 0:
                     tables[etype.name] = T
-            if drive is not None:
-                bad = _contradicted(etype, grid, drive)
-                if bad.any():
-                    T = np.where(bad[None, :], np.inf, T)
+            if excluded and etype.name in excluded:
+                T = np.where(excluded[etype.name][None, :], np.inf, T)
             nd = S.null_distance(etype, grid)
             ks, acts = S.fit_counts(etype, grid), S.acting(preps, etype, grid)
             held, picks = _fold_heldout(T, w, folds, n_run, ks, acts, nd, etype)
             j, sse_j = S.pick(T, w, n_run, ks, acts, nd)
-            idx, wts, x = S.subgrid(w @ np.where(np.isfinite(T), T, 1e300), j, etype)
+            Tf = S.finite_table(T)
+            idx, wts, x = S.subgrid(w @ Tf, j, etype)
             if x is not None:
-                sse_j = float(max(w @ (np.where(np.isfinite(T), T, 1e300)[:, idx] @ wts), 0.0))
+                sse_j = float(max(w @ (Tf[:, idx] @ wts), 0.0))
             form, params = _at(etype, grid, (j, x))
             k = _n_fit(etype, form, params)
             bic, aic = _ic(sse_j, n_eff, n_params + k)
-            # a held-out run the candidate cannot predict (non-finite: held as 1e300 so that
+            # a held-out run the candidate cannot predict (non-finite: held at S.UNPREDICTED so that
             # ranking puts it last) has no RMSE: inf, reported as "-", never as a number
-            rmse_h = math.nan if n_held <= 0 else (math.inf if held >= 1e299 else math.sqrt(held / n_held))
+            rmse_h = math.nan if n_held <= 0 else (math.inf if held >= S.UNPREDICTED_AT else math.sqrt(held / n_held))
             starts = [(etype, *_at(etype, grid, pk)) for pk in picks]
             rows.append([etype, form, params, rmse_h, _shrink(rmse_b, rmse_h), bic - bic0, aic - aic0, k,
                          starts, sse_j, None if lp is None else (lp[j], [lp[pk[0]] for pk in picks])])
@@ -892,8 +899,9 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
     tables: dict = {}
     loops = _loops(model, sweep) if sweep is not None else None
     drive = D.tip_behind_current(model, sweep) if sweep is not None else None
+    excluded = _contradicted(families, drive)
     rounds, chosen, fold_starts, knobs, fold_knobs = _select(fit, w, folds, base, families, max_effects, progress,
-                                                             tables, loops, drive)
+                                                             tables, loops, excluded)
     before_full = full
     if knobs is not None:
         # the first effect chosen came with its loop, re-identified from the sweep under it
@@ -975,7 +983,7 @@ def _diagnose(model, runs, names, base, cands, folds, scheme, max_effects, boots
                 if bfolds:
                     break
             _, bchosen, _, _, _ = _select(before_fit, wb, bfolds, base, families, max_effects, tables=tables,
-                                          loops=loops, drive=drive)
+                                          loops=loops, excluded=excluded)
             for et, _, _ in bchosen:
                 counts[et.name] = counts.get(et.name, 0) + 1
             if chosen:

@@ -30,9 +30,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .current import condition
 from .errors import HystError
-from .identify.current import read_current
+from .identify.current import conditioned_current, read_current
 from .identify.sweep import check_sweep
 from .io import Run
 from .model import Model
@@ -95,15 +94,12 @@ def tip_behind_current(model: Model, sweep: Run) -> TipBehindCurrent | None:
     t = np.asarray(sweep["t"], float)
     readings = []
     for k, kn in model.knobs.items():
-        if f"c{k}" not in sweep or f"q{k}" not in sweep:
+        c = conditioned_current(sweep, k) if f"q{k}" in sweep else None
+        if c is None or c.size < 20:
             continue
         q = np.asarray(sweep[f"q{k}"], float)
-        c = np.asarray(sweep[f"c{k}"], float)
-        if q.size < 20 or not np.ptp(c) > 0:
-            continue
         try:
-            chk = check_sweep(sweep, k, need_current=True)
-            reading = read_current(q, condition(c, sweep.sample_rate, 20.0), t, chk)
+            reading = read_current(q, c, t, check_sweep(sweep, k, need_current=True))
         except HystError:
             continue
         v = np.gradient(q, t)

@@ -25,6 +25,19 @@ from .errors import ModelError
 from .io import Run
 from .model import KnobModel, Model, Shape
 
+UNPREDICTED = 1e300
+"""The SSE a table cell holds where a grid point cannot predict a run (non-finite): finite, so
+that weighted sums over runs stay defined, and large enough to rank last. A weighted sum at or
+above :data:`UNPREDICTED_AT` contains one."""
+
+UNPREDICTED_AT = 1e299
+
+
+def finite_table(T: np.ndarray) -> np.ndarray:
+    """An SSE table with its non-finite cells held at :data:`UNPREDICTED`."""
+    return np.where(np.isfinite(T), T, UNPREDICTED)
+
+
 DECIMATE_ABOVE_HZ = 100.0
 """Runs sampled at this rate or faster are decimated for the parameter search (to >= half of it:
 50 Hz keeps a 0.02 s resolution of delays and lags, under the 20 Hz filter of the tracker)."""
@@ -294,10 +307,10 @@ def subgrid(obj: np.ndarray, j: int, etype: EffectType) -> tuple[np.ndarray, np.
     lo, hi, names = axis_neighbours(etype)
     a, b = int(lo[j]), int(hi[j])
     idx = np.array([j, j, j])
-    # a neighbour no run can be predicted at (held as 1e300 by the callers) bounds nothing: a
-    # parabola through it would put the vertex anywhere, and its Lagrange weights, one of them
-    # negative, would cancel the 1e300 into any held-out SSE, zero included
-    if a < 0 or b < 0 or not all(np.isfinite(obj[[a, j, b]])) or float(np.max(obj[[a, j, b]])) >= 1e299:
+    # a neighbour no run can be predicted at (held at UNPREDICTED) bounds nothing: a parabola
+    # through it would put the vertex anywhere, and its Lagrange weights, one of them negative,
+    # would cancel it into any held-out SSE, zero included
+    if a < 0 or b < 0 or not all(np.isfinite(obj[[a, j, b]])) or float(np.max(obj[[a, j, b]])) >= UNPREDICTED_AT:
         return idx, np.array([0.0, 1.0, 0.0]), None
     grid = family_grid(etype)
     p = names[j]
@@ -326,13 +339,13 @@ def pick(T: np.ndarray, w: np.ndarray, n: np.ndarray, ks: np.ndarray, acts: np.n
     nearest to off.
     """
     on = w > 0
-    obj = w[on] @ np.where(np.isfinite(T[on]), T[on], 1e300)
+    obj = w[on] @ finite_table(T[on])
     n_w = max(float(w[on] @ n[on]), 1.0)
     seen = acts[on].sum(axis=0)
     k_min = int(ks[ks > 0].min()) if np.any(ks > 0) else 0
     need = np.where(ks > k_min, ks + 1, ks)
     ok = (need <= np.maximum(seen, 1)) | (ks == 0)
-    crit = np.where(ok & (obj < 1e299), n_w * np.log(np.maximum(obj, 1e-300) / n_w) + ks * math.log(n_w), np.inf)
+    crit = np.where(ok & (obj < UNPREDICTED_AT), n_w * np.log(np.maximum(obj, 1e-300) / n_w) + ks * math.log(n_w), np.inf)
     j = argmin(crit, null_dist, tol=1e-9 * n_w)
     return j, float(obj[j])
 

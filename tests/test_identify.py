@@ -464,65 +464,60 @@ def test_an_edge_the_tip_and_the_current_place_apart_is_not_claimed_when_both_lo
         if name in fit.stderr:
             assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 0.5
 
-
-@pytest.mark.parametrize("seed", [295, 478])
-def test_current_only_ignores_a_kink_where_a_held_load_starts_to_unload(seed):
+def _zoo_current_fit(seed: int):
+    """An independent zoo plant's sweep (design seed), its motor current only, and identify's fit."""
     from hystcli.io import parse_run
     from hystcli.zoo import plants
 
+    case = plants.sweep_case(seed, tip=False)
+    return case, identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+
+
+def _assert_within(fit, truth, names, tol: float = 1.0):
+    """Every one of ``names`` claimed (with a standard error) and within ``tol`` deg of the truth."""
+    for name in names:
+        assert name in fit.stderr
+        assert abs(getattr(fit.model, name) - getattr(truth, name)) <= tol, name
+
+
+@pytest.mark.parametrize("seed", [295, 478])
+def test_current_only_ignores_a_kink_where_a_held_load_starts_to_unload(seed):
     # independent tip-load plants (design seeds): on the last stretch, after the reversal, the
     # current holds the other tendon's load and then unloads; that kink (far from the no-load
     # level) disagreed with the true edges and made identify refuse the whole record
-    case = plants.sweep_case(seed, tip=False)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    case, fit = _zoo_current_fit(seed)
     for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
         assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
 
 
 @pytest.mark.parametrize("seed,family", [(88, "coulomb-viscous"), (660, "pretension"), (253, "coulomb-viscous")])
 def test_current_only_reads_a_plateau_tilted_like_the_dead_zone(seed, family):
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plants (design seeds): a pretensioned tendon's spring, or the motor's viscous
     # term following the sine's speed, tilts the backlash plateau as much as the dead zone; the
     # load itself holds. Before, the plateau had to be flat against the unloading slope and
     # identify refused "no backlash plateau" on all three.
-    case = plants.sweep_case(seed, tip=False)
+    case, fit = _zoo_current_fit(seed)
     assert case.family == family and case.current_shows_backlash
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
-    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
-        assert name in fit.stderr
-        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+    _assert_within(fit, case.truth, ("d_pos", "d_neg", "b_pos", "b_neg"))
 
 
 @pytest.mark.parametrize("seed", [474, 149])
 def test_current_only_reads_the_plateau_before_the_next_reversal_drop(seed):
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent drop-at-reversal plants (design seeds): the load drops at once at each
     # reversal, and the zero-phase filter spreads the next reversal's drop back into the end of
     # the stretch; that drop took one of the five pieces the plateau, the unloading, the dead
     # zone and the loading need, and identify refused "no backlash plateau"
-    case = plants.sweep_case(seed, tip=False)
+    case, fit = _zoo_current_fit(seed)
     assert case.family == "drop-at-reversal" and case.current_shows_backlash
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
-    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
-        assert name in fit.stderr
-        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+    _assert_within(fit, case.truth, ("d_pos", "d_neg", "b_pos", "b_neg"))
 
 
 @pytest.mark.parametrize("seed,name", [(85, "d_pos"), (179, "d_pos"), (502, "d_pos"), (152, "d_neg")])
 def test_current_only_edge_uncertainty_is_no_finer_than_its_bins(seed, name):
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plants (design seeds): the kink fits gave the current's edge a standard error
     # of 0.014-0.021 deg where it sat 0.03-0.16 deg from the truth (the current law rounds the
     # corner); the reading cannot be finer than the knob-angle bins it is made on
-    case = plants.sweep_case(seed, tip=False)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    case, fit = _zoo_current_fit(seed)
     err = getattr(fit.model, name) - getattr(case.truth, name)
     assert abs(err) <= 2 * fit.stderr[name]
     assert fit.stderr[name] <= 0.5
@@ -634,11 +629,8 @@ def test_current_only_refuses_an_edge_whose_dead_zone_is_a_curve(seed, name):
 def test_current_only_keeps_an_edge_whose_dead_zone_tilts_less_than_a_fifth_of_its_loading(seed):
     # 1042: its positive dead-zone piece is 5.9x the negative one's but only 0.165 of the loaded
     # slope (DEAD_SHARE 0.2): still read, within 0.6 deg
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
 
-    case = plants.sweep_case(seed, tip=False)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    case, fit = _zoo_current_fit(seed)
     truth = case.truth.as_dict()
     for name, value in fit.model.params().items():
         if name in fit.stderr:
@@ -647,19 +639,13 @@ def test_current_only_keeps_an_edge_whose_dead_zone_tilts_less_than_a_fifth_of_i
 
 @pytest.mark.parametrize("seed,family", [(561, "tip-load"), (211, None), (496, None)])
 def test_current_only_reads_a_plateau_longer_than_each_unloading_piece(seed, family):
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plants (design seeds): the held load after a reversal is longer than the
     # tendon's unloading, or than each piece the segmentation split the unloading into (561:
     # a 12 deg plateau before 6 + 6 deg of unloading); the reading took the longest piece before
     # the dead zone for the unloading, found the plateau itself, and refused "no backlash plateau"
-    case = plants.sweep_case(seed, tip=False)
+    case, fit = _zoo_current_fit(seed)
     assert case.current_shows_backlash and (family is None or case.family == family)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
-    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
-        assert name in fit.stderr
-        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+    _assert_within(fit, case.truth, ("d_pos", "d_neg", "b_pos", "b_neg"))
 
 
 def test_current_only_refuses_a_plateau_many_times_its_unloading():
@@ -678,32 +664,22 @@ def test_current_only_refuses_a_plateau_many_times_its_unloading():
 
 
 def test_current_only_reads_a_pretensioned_plateau_against_the_dead_zone_slope():
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plant (design seed 1, pretension on a drop-at-reversal law): the pretension
     # slope (2.5 mA/deg) is more than half the unloading's (5.0), so the plateau's tilt was
     # judged against zero and the plateau refused; and the kink fit took the unloading piece
     # (twice the dead zone's slope) for part of the dead zone and put d_pos 1.9 deg late
-    case = plants.sweep_case(1, tip=False)
+    case, fit = _zoo_current_fit(1)
     assert case.family == "pretension"
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
-    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
-        assert name in fit.stderr
-        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+    _assert_within(fit, case.truth, ("d_pos", "d_neg", "b_pos", "b_neg"))
 
 
 def test_current_only_edge_is_not_read_out_of_a_reversal_before_a_held_load():
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plant (design seed 28, pretensioned drop-at-reversal law): after the bottom
     # reversal the first half degree is flatter than the held plateau's pretension slope, so the
     # reversal was taken for the dead zone and the plateau (6 mA/deg) for the loading, with the
     # unloading (29) and the real dead zone (6) after it; the loading edge d_pos went unread from
     # every stretch from a reversal and identify refused "never clearly shows the positive tendon"
-    case = plants.sweep_case(28, tip=False)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    case, fit = _zoo_current_fit(28)
     assert abs(fit.model.d_pos - case.truth.d_pos) <= 1.0
 
 
@@ -725,13 +701,9 @@ def test_the_end_of_a_held_plateau_is_placed_by_a_two_line_fit():
 
 
 def test_current_only_backlash_from_a_noisy_plateau_end_is_within_a_degree():
-    from hystcli.io import parse_run
-    from hystcli.zoo import plants
-
     # independent plant (design seed 867, Coulomb-viscous, current noise 0.7 mA): the plateaus'
     # ends read at the segmentation's boundaries put b_pos 1.7 deg and b_neg 1.2 deg off, each from
     # one stretch, with a stated standard error of 0.3; placed by a two-line fit: within 0.6 deg
-    case = plants.sweep_case(867, tip=False)
-    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    case, fit = _zoo_current_fit(867)
     for name in ("b_pos", "b_neg"):
         assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name

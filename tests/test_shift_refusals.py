@@ -57,6 +57,21 @@ class Knob:
         pass
 
 
+def right_or_refused(m: Model, probe, seeds: int, offset: float, refusal: str | None = None, **kw) -> int:
+    """Over ``seeds`` noise draws of ``probe(seed)``, each search returns ``offset`` within 0.5 deg
+    or refuses (with ``refusal`` in its message, when given); the number that returned."""
+    taken = 0
+    for seed in range(seeds):
+        try:
+            r = detect_shift(m, probe(seed), 1, **kw)
+        except ShiftDetectionError as exc:
+            assert refusal is None or refusal in str(exc), seed
+            continue
+        taken += 1
+        assert r.offset == pytest.approx(offset, abs=0.5), seed
+    return taken
+
+
 def tendons(dn: float, dp: float, k: float = 4.0, pre: float = 0.0, coulomb: float = 6.0):
     """Signed current with the dead zone [dn, dp]: loaded slope ``k`` past either edge, a
     pretension slope ``pre`` everywhere, the motor's Coulomb friction with the direction."""
@@ -273,13 +288,7 @@ def test_a_faint_edge_is_placed_within_half_a_degree_or_refused():
     # past it: a kink the readings place only loosely is no offset
     law = tendons(-8.0, 6.0, k=1.5)
     m = model(slope_dead_zone=0.2, slope_loaded=1.5)
-    for seed in range(8):
-        try:
-            r = detect_shift(m, Knob(law, noise=1.5, seed=seed), 1, max_travel=10.0)
-        except ShiftDetectionError as exc:
-            assert "no edge found" in str(exc)
-            continue
-        assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+    right_or_refused(m, lambda seed: Knob(law, noise=1.5, seed=seed), 8, -3.0, "no edge found", max_travel=10.0)
 
 
 # --------------------------------------------------------------------------------------------
@@ -344,12 +353,7 @@ def test_the_end_of_the_plateau_of_the_tendon_behind_is_no_edge():
         pos = 25.0 if q >= -3.5 else max(25.0 - 6.0 * (-3.5 - q), 0.0)
         return 120.0 + 6.0 * d + pos - 3.0 * max(-8.0 - q, 0.0)
 
-    for seed in range(6):
-        try:
-            r = detect_shift(model(), Knob(law, seed=seed), 1, direction=-1)
-        except ShiftDetectionError:
-            continue
-        assert r.offset == pytest.approx(-3.0, abs=0.5), seed
+    right_or_refused(model(), lambda seed: Knob(law, seed=seed), 6, -3.0, direction=-1)
 
     # the same flat with the negative tendon taken up at -3.5 and loading at 6 mA/deg in one
     # straight line through the no-load level (a dead zone whose no-load level lies 19 mA off
@@ -428,12 +432,7 @@ def test_a_flat_that_runs_from_the_taut_side_into_the_no_load_band_is_an_unloadi
         pos = 145.0 + 2.5 * q if q >= -6.0 else max(130.0 - 8.0 * (-6.0 - q), 100.0)
         return pos - 4.0 * max(-12.0 - q, 0.0)
 
-    for seed in range(6):
-        try:
-            r = detect_shift(model(), Knob(law, seed=seed), 1, direction=-1)
-        except ShiftDetectionError:
-            continue
-        assert r.offset == pytest.approx(-7.0, abs=0.5), seed
+    right_or_refused(model(), lambda seed: Knob(law, seed=seed), 6, -7.0, direction=-1)
     r = detect_shift(model(), Knob(law, seed=0), 1, direction=-1)
     assert r.edge == "neg" and r.start_outside and r.offset == pytest.approx(-7.0, abs=0.25)
 
@@ -458,11 +457,6 @@ def test_a_held_load_beyond_the_band_must_run_past_both_no_load_levels():
         return pos - 4.0 * max(-14.0 - q, 0.0)
 
     m = model(current_dead_zone=125.0, no_load_rising=90.0, no_load_falling=160.0)
-    for seed in range(6):
-        try:
-            r = detect_shift(m, Moving(law, seed=seed), 1, direction=-1)
-        except ShiftDetectionError:
-            continue
-        assert r.offset == pytest.approx(-9.0, abs=0.5), seed
+    right_or_refused(m, lambda seed: Moving(law, seed=seed), 6, -9.0, direction=-1)
     r = detect_shift(m, Moving(law, seed=0), 1, direction=-1)
     assert r.edge == "neg" and r.offset == pytest.approx(-9.0, abs=0.25)

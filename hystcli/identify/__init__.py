@@ -29,7 +29,7 @@ from ..current import condition
 from ..errors import IdentificationError, ModelError
 from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
-from .current import CurrentReading, read_current
+from .current import CurrentReading, conditioned_current, read_current
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
@@ -236,15 +236,12 @@ def identify(run: Run, knobs: Sequence[int] | None = None, omega: float | None =
 def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstrap: int, seed: int,
                    filter_hz: float | None, where: str, max_misfit: float = MAX_MISFIT,
                    refuse_unfixed: bool = True) -> KnobFit:
-    yname, cname = f"y{k}", f"c{k}"
+    yname = f"y{k}"
     tip = use_tip and yname in run
     chk = check_sweep(run, k, need_current=not tip)
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
-    c = None
-    if cname in run and np.ptp(run[cname]) > 1e-9 * max(1.0, float(np.max(np.abs(run[cname])))):
-        fs = run.sample_rate if "t" in run else None
-        c = condition(np.asarray(run[cname], float), fs, filter_hz)
+    c = conditioned_current(run, k, filter_hz)
     reading = read_current(q, c, t, chk) if c is not None else None
     warnings: list[str] = []
     ambiguous_edges: list[str] = []

@@ -29,8 +29,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ..current import (FLAT_AFTER, MIN_CLARITY, Kink, arrival_edge, edge_piece, kink_fit, loading_edge, pieces,
-                       robust_noise)
+from ..current import (FLAT_AFTER, MIN_CLARITY, Kink, arrival_edge, condition, edge_piece, kink_fit, loading_edge,
+                       pieces, robust_noise)
+from ..io import Run
 from .sweep import SweepCheck
 
 UNLOAD_LEVEL = 5.0
@@ -282,16 +283,10 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
         return _held_plateau(pieces, slopes, lengths, xb, sig, dead)
     while ju > 0 and abs(slopes[ju - 1] - unload) < 0.4 * unload:
         ju -= 1
-    background = slopes[dead] if abs(slopes[dead]) <= 0.5 * unload or 0.0 < slopes[dead] < unload else 0.0
-    # judged against the unloading's own share of the slope: with a pretensioned tendon the dead
-    # zone climbs at a fair share of the unloading slope (design seed 1: 2.5 against 5.0 mA/deg)
-    rel = unload - max(background, 0.0)
+    background, rel = _background(slopes[dead], unload)
 
     def held(k: int) -> bool:
-        # flat, or no steeper than the dead zone's own slope (a pretensioned tendon's spring, or
-        # the motor's viscous term following the sine's speed, tilt the plateau the same as the
-        # dead zone: the load itself does not change)
-        return min(abs(slopes[k]), abs(slopes[k] - background)) <= 0.15 * rel and lengths[k] >= 1.0
+        return _level(slopes[k], background, rel) and lengths[k] >= 1.0
 
     # a stiffening cable unloads convexly: steepest just after the plateau, where its load is
     # largest, and the segmentation splits the unloading into pieces that soften in turn. After a
@@ -319,6 +314,21 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
         (float(xb[pieces[ju - 1][0]]), float(xb[pieces[ju][1] - 1]))
 
 
+def _background(dead_slope: float, unload: float) -> tuple[float, float]:
+    """The dead zone's own slope, against which a held plateau is judged, and the unloading's share
+    of the slope above it: with a pretensioned tendon the dead zone climbs at a fair share of the
+    unloading slope (design seed 1: 2.5 against 5.0 mA/deg)."""
+    bg = dead_slope if abs(dead_slope) <= 0.5 * unload or 0.0 < dead_slope < unload else 0.0
+    return bg, unload - max(bg, 0.0)
+
+
+def _level(slope: float, background: float, rel: float) -> bool:
+    """A piece whose load holds: flat, or no steeper than the dead zone's own slope (a
+    pretensioned tendon's spring, or the motor's viscous term following the sine's speed, tilt the
+    plateau the same as the dead zone: the load itself does not change)."""
+    return min(abs(slope), abs(slope - background)) <= 0.15 * rel
+
+
 HELD_LEAD = 2.0
 """Knob travel (deg) after a reversal within which a held plateau must begin (:func:`_held_plateau`):
 an immediate drop (the sheath friction flipping over a fraction of a degree) or the motor's own
@@ -344,7 +354,6 @@ def _held_plateau(pieces, slopes, lengths, xb, sig, dead: int) -> tuple[float | 
     longest piece; its ends may be rounded (the 20 Hz filter), so its pieces need only be clearly
     steeper than the plateau, not equal.
     """
-    background = slopes[dead]
     for k in range(dead - 2, -1, -1):
         group = range(k + 1, dead)
         ju = max(group, key=lambda j: lengths[j])
@@ -352,12 +361,10 @@ def _held_plateau(pieces, slopes, lengths, xb, sig, dead: int) -> tuple[float | 
         if not unload > 0:
             continue
         length = xb[pieces[dead - 1][1] - 1] - xb[pieces[k + 1][0]]
-        bg = background if abs(background) <= 0.5 * unload or 0.0 < background < unload else 0.0
-        rel = unload - max(bg, 0.0)
-        flat = min(abs(slopes[k]), abs(slopes[k] - bg)) <= 0.15 * rel and lengths[k] >= 1.0
-        if not flat:
+        bg, rel = _background(slopes[dead], unload)
+        if not (_level(slopes[k], bg, rel) and lengths[k] >= 1.0):
             continue
-        steep = all(slopes[j] > 0 and min(abs(slopes[j]), abs(slopes[j] - bg)) > 0.15 * rel for j in group)
+        steep = all(slopes[j] > 0 and not _level(slopes[j], bg, rel) for j in group)
         lead = xb[pieces[k][0]] - xb[pieces[0][0]]
         width = float(0.5 * (xb[pieces[k][1] - 1] + xb[pieces[k + 1][0]]))
         if steep and length >= 1.0 and unload * length > 6 * sig and lead <= HELD_LEAD \
@@ -393,6 +400,19 @@ def _dead_piece(pieces, slopes, xb, edge_piece: int | None) -> int | None:
         return None
     j = min(long_enough, key=lambda k: abs(slopes[k]))
     return j if abs(slopes[j]) <= FLAT_AFTER * max(max(slopes[:j]), 1e-12) else None
+
+
+def conditioned_current(run: Run, k: int, filter_hz: float | None = 20.0) -> np.ndarray | None:
+    """Knob ``k``'s motor current despiked and low-passed (:func:`hystcli.current.condition`) at the
+    run's sample rate; None when the run has none, or one that never moves (a logger's placeholder
+    column)."""
+    name = f"c{k}"
+    if name not in run:
+        return None
+    raw = np.asarray(run[name], float)
+    if not np.ptp(raw) > 1e-9 * max(1.0, float(np.max(np.abs(raw)))):
+        return None
+    return condition(raw, run.sample_rate if "t" in run else None, filter_hz)
 
 
 def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -> CurrentReading:
