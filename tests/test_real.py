@@ -83,3 +83,29 @@ def test_diagnose_names_the_stretch_across_real_loads_and_where_the_model_holds(
     # the model was identified at 20 %: the stretch it needs is zero there
     assert 15.0 <= st["reference"] <= 25.0 and st["compliance"] > 0
     assert d.how_far.rmse_after < 0.5 * d.how_far.rmse_before
+
+
+def test_real_study_donors_never_read_a_held_out_file():
+    """scripts/real_study.py --donors: no donor diagnosis reads a file held out for the condition
+    it lends to, and across the tables no donor comes from the condition's own session."""
+    import importlib.util
+    import sys
+
+    path = Path(__file__).resolve().parent.parent / "scripts" / "real_study.py"
+    spec = importlib.util.spec_from_file_location("real_study", path)
+    rs = importlib.util.module_from_spec(spec)
+    sys.modules.setdefault("real_study", rs)  # its dataclasses look their module up
+    spec.loader.exec_module(sys.modules["real_study"])
+    rs = sys.modules["real_study"]
+    diags = {c: rs.Diag(c, (), 0.0, 0.0, "", "") for c in rs.CONDITIONS}
+    for c in rs.CONDITIONS:
+        table = rs.donors_of(c, diags, "table")
+        loads = rs.donors_of(c, diags, "loads")  # asserts the leakage rules itself
+        if c.table == "load":
+            assert loads == table
+        elif c.series.startswith("pitch"):
+            assert sorted(d.cond.series for d in loads) == sorted(f"pitch_{n}" for n in range(1, 6)
+                                                                   if f"pitch_{n}" != c.series)
+            assert all(d.cond.table == "load" for d in loads)
+        else:
+            assert loads == []  # load_freq is one session: no other session lends to it
