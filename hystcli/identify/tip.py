@@ -74,9 +74,13 @@ step for backlash width, and leaves the edge on a flat a few hundredths of a deg
 
 FLAT_CONTRAST = 4.0
 """How clearly a dead-zone flat must stand apart from the loaded lines either side of it:
-``omega * seen * sqrt(samples on it) >= FLAT_CONTRAST * noise``, ``seen`` the knob span the tip
-travels on the flat (the step between the flat and its loaded line over that span, averaged over
-the samples that see it, in units of the tip's noise)."""
+``omega * seen * sqrt(samples on it / tau) >= FLAT_CONTRAST * noise``, ``seen`` the knob span the
+tip travels on the flat (the step between the flat and its loaded line over that span, averaged
+over the samples that see it, in units of the tip's noise), ``tau`` the residuals'
+autocorrelation time: a filtered tracker's neighbouring samples share one noise draw, so a flat
+seen over fewer samples than ``tau`` is one draw, however many samples it holds (held-out replay
+1000343's straight sweep, 1.6 kHz filtered: a fitted flat under the record's last 5 samples,
+tau 12.5, took d_neg 4.5 deg off with a stated uncertainty of 0.025 deg)."""
 
 # theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
 _LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
@@ -589,8 +593,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     rmse = float(np.sqrt(np.mean((at_walls(free, walls, y) - y) ** 2)))
     with threadpool_limits(limits=1):
         stderr, tau = _stderr(th, qf, yf, resid, noise, cf)
-    unident, sliding = _unidentified(th, model, qf, stderr, span, noise)
-    sliding = {**sliding, **_slides_unseen(th, qf, yf, cf, noise, set(unident) | set(sliding))}
+    unident, sliding = _unidentified(th, model, qf, stderr, span, noise, tau)
+    sliding = {**sliding, **_slides_unseen(th, qf, yf, cf, noise, set(unident) | set(sliding), tau)}
     return TipFit(model=model, stderr=stderr, rmse=rmse, noise=noise, tau=tau, z_init=float(th[7]),
                   theta=th, unidentified=unident, sliding=sliding, n_samples=int(qf.size), walls=tuple(walls))
 
@@ -604,7 +608,7 @@ tell the slid edge from the fitted one: two standard errors."""
 
 
 def _slides_unseen(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | None, noise: float,
-                   done: set[str]) -> dict[str, str]:
+                   done: set[str], tau: float = 1.0) -> dict[str, str]:
     """Dead-zone edges the record cannot place within :data:`SLIDE_STEP`.
 
     An edge and its dead-zone height slide together along the loaded line (the line stays put,
@@ -618,7 +622,7 @@ def _slides_unseen(th: np.ndarray, q: np.ndarray, y: np.ndarray, cens: Censor | 
     out: dict[str, str] = {}
     m = model_of(th)
     base = float(np.sum(_residuals(th, q, y, cens) ** 2))
-    var = max(noise, 1e-12) ** 2
+    var = max(noise, 1e-12) ** 2 * max(tau, 1.0)
     for name in ("d_pos", "d_neg"):
         if name in done:
             continue
@@ -801,7 +805,7 @@ def _stderr(th: np.ndarray, q: np.ndarray, y: np.ndarray, resid: np.ndarray,
 
 
 def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[str, float],
-                  span: float, noise: float) -> tuple[dict[str, str], dict[str, str]]:
+                  span: float, noise: float, tau: float = 1.0) -> tuple[dict[str, str], dict[str, str]]:
     """Parameters the record cannot fix, with the physical reason (see the module docstring).
 
     Returns ``(unfixed, sliding)``: ``unfixed`` leaves the model's prediction itself undetermined
@@ -841,7 +845,7 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         # the flat the tip actually travels: a record that only reaches a flat's end (its last
         # samples) sees the flat part from its loaded line over that span alone
         seen = float(np.ptp(q[m])) if m.sum() >= 2 else 0.0
-        contrast = model.omega * seen * math.sqrt(m.sum()) / max(noise, 1e-12)
+        contrast = model.omega * seen * math.sqrt(m.sum() / max(tau, 1.0)) / max(noise, 1e-12)
         if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH:
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
                          f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the {seen:.2f} deg it travels: too little "
