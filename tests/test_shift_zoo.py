@@ -109,3 +109,17 @@ def test_a_straight_sweep_that_ends_on_a_flat_it_barely_enters_does_not_claim_th
     except ShiftDetectionError:
         return
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_held_load_read_as_the_no_load_level_does_not_make_the_unloading_an_edge():
+    # held-out replay 1400205 (examined in stop 21): a tip-load plant whose straight sweep identify
+    # refuses, so the model is the true loop with the current levels read on that sweep. Those
+    # read the positive tendon's held load (its tip on a 15.7-deg backlash plateau across the
+    # 17-deg dead zone) as the no-load level moving down, 97 mA off; the replay starts with that
+    # tendon taut and the search took its unloading for the negative edge: -1.55 deg, true -9.24.
+    case, detect = _detect(1400205)
+    try:
+        r = detect()
+    except ShiftDetectionError:
+        return
+    assert r.offset == pytest.approx(case.offset, abs=0.5)

@@ -404,15 +404,33 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
     if hi <= lo:
         lo, hi = model.d_neg, model.d_pos
     slack = (q >= lo) & (q <= hi)
+    # on a dead-zone flat of the model's tip: neither tendon carries the tip. Inside the knob's
+    # dead zone alone is not enough: after a reversal the tip rests on its backlash plateau, and
+    # a current that follows the tip's load holds it there (a plateau as wide as the dead zone
+    # held the whole crossing: held-out replay 1400205's sweep read its held load, 97 mA off, as
+    # the no-load level moving down, and detect-shift took the unloading for an edge, 7.7 deg off)
+    dh = (model.h_neg - model.h_pos) / model.omega
+    half = 0.5 * dh
+    z = z_path(q, (model.d_neg, model.d_pos, model.b_pos, model.b_neg, dh), 0.0 if fit is None else fit.z_init)
+    on_flat = np.abs(np.abs(z) - half) < 1e-9 * max(1.0, abs(half))
+    if fit is None:
+        # without the tip the state before the knob first takes a tendon up is unknown
+        tol = 1e-9 * max(1.0, float(np.ptp(q)))
+        taken = ((q > model.d_pos) & (np.abs(z - (q - model.d_pos) + half) < tol)) | (
+            (q < model.d_neg) & (np.abs(z - (q - model.d_neg) - half) < tol))
+        on_flat[:int(np.argmax(taken)) if taken.any() else q.size] = False
+    levels = []
+    for way in (dq > 0, dq < 0):
+        # a record whose tip never reaches a flat moving this way (a short stroke, a plateau as
+        # wide as the dead zone) reads the knob's dead zone: a stretch-following current is
+        # slack there, and nothing better is in the record (design replays 0-799 of
+        # bench/zoo.py: the flat alone lost one direction's level on 30 true-loop models)
+        on = slack & on_flat & way
+        on = on if on.sum() >= 5 else slack & way
+        levels.append(float(np.median(c[on])) if on.sum() >= 5 else None)
+    no_rise, no_fall = levels
     if fit is not None:
-        # on a dead-zone flat of the fitted tip: neither tendon carries the tip
-        z = z_path(q, (model.d_neg, model.d_pos, model.b_pos, model.b_neg,
-                       (model.h_neg - model.h_pos) / model.omega), fit.z_init)
-        half = 0.5 * (model.h_neg - model.h_pos) / model.omega
-        slack &= np.abs(np.abs(z) - half) < 1e-9 * max(1.0, abs(half))
-    rising, falling = slack & (dq > 0), slack & (dq < 0)
-    no_rise = float(np.median(c[rising])) if rising.sum() >= 5 else None
-    no_fall = float(np.median(c[falling])) if falling.sum() >= 5 else None
+        slack &= on_flat
     known = [v for v in (no_rise, no_fall) if v is not None]
     if reading is not None and not known:
         known = list(reading.no_load.values())

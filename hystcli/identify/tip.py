@@ -846,11 +846,20 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         # samples) sees the flat part from its loaded line over that span alone
         seen = float(np.ptp(q[m])) if m.sum() >= 2 else 0.0
         contrast = model.omega * seen * math.sqrt(m.sum() / max(tau, 1.0)) / max(noise, 1e-12)
-        if m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH:
+        # the knob travel over the residuals' autocorrelation time at the flat: a tracker's
+        # filter rounds a corner over that much, and a flat no longer is the fit trading the
+        # rounding for an edge
+        memory = float(np.median(np.abs(np.diff(q[m])))) * max(tau, 1.0) if m.sum() >= 2 else 0.0
+        if (m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH
+                or seen < memory):
+            why = ("no longer than the knob travels within the tracker's own memory "
+                   f"({memory:.2f} deg over {tau:.0f} samples), as a filter rounds a corner"
+                   if seen < memory and not (m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST) else
+                   "too little against the tracker's noise")
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
-                         f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the {seen:.2f} deg it travels: too little "
-                         "against the tracker's noise to place the edge apart from the "
-                         "dead-zone height; sweep slower or sample faster")
+                            f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the "
+                            f"{seen:.2f} deg it travels ({why}): the edge cannot be placed apart from the "
+                            "dead-zone height; sweep slower or sample faster")
     # backlash: after a reversal beyond the edge plus Delta the tip leaves its plateau on the
     # unloading slope, which is what fixes the plateau's width
     dn_unload = (q > dhat_neg) & np.isclose(z, 0.5 * dh + (q - dhat_neg), atol=1e-9) & (dq < 0)
