@@ -27,6 +27,18 @@ def _detect(seed: int):
     return case, lambda: shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
 
 
+def _right_or_refused(seed: int):
+    """Algorithm 1 on zoo replay ``seed``: the offset within 0.5 deg of the truth, or a refusal
+    (None); the result when it returned."""
+    case, detect = _detect(seed)
+    try:
+        r = detect()
+    except ShiftDetectionError:
+        return None
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+    return r
+
+
 def test_a_taut_start_whose_current_runs_back_into_the_no_load_band_is_no_edge():
     # design seed 1304 (a wall plant, load-following current): the knob rests with the positive
     # tendon taut; moving down, its current eases off in one line from 208 mA (off the sweep's
@@ -52,12 +64,7 @@ def test_a_held_load_whose_unloading_runs_through_a_misread_no_load_level_is_no_
     # 56 mA/deg in one line through 356 mA toward 84. The rise was taken for the negative
     # tendon's edge: an offset of -2.88 deg where the true shift is -15.73. The true edge,
     # -31.5 deg, lies at the travel limit (31.1 deg): a refusal is the right answer.
-    case, detect = _detect(3533)
-    try:
-        r = detect()
-    except ShiftDetectionError:
-        return
-    assert r.offset == pytest.approx(case.offset, abs=0.5)
+    _right_or_refused(3533)
 
 
 def test_a_kink_between_two_gentle_slopes_is_not_the_edge_the_steep_rise_after_it_is():
@@ -83,13 +90,8 @@ def test_a_flat_short_of_the_no_load_level_is_a_taut_tendon_behind_or_refused():
     # (+-24 mA); where the tip leaves the plateau the tendon unloads at 8 mA/deg and the positive
     # one takes over at the no-load level in the same line. The rise's start at 5.6 deg was taken
     # for the edge: offset -2.11 deg on an unshifted replay. The shift is 0.
-    case, detect = _detect(1000327)
-    assert case.offset == 0.0
-    try:
-        r = detect()
-    except ShiftDetectionError:
-        return
-    assert abs(r.offset) <= 0.5
+    assert plants.replay_case(1000327).offset == 0.0
+    _right_or_refused(1000327)
 
 
 def test_a_straight_sweep_that_ends_on_a_flat_it_barely_enters_does_not_claim_that_edge():
@@ -99,16 +101,10 @@ def test_a_straight_sweep_that_ends_on_a_flat_it_barely_enters_does_not_claim_th
     # and claimed it to +-0.025 deg from the 5 samples there, which are one noise draw (the
     # residuals' autocorrelation time is 12.5 samples). The search took an offset from it,
     # 2.4 deg off. d_neg is now left unclaimed (sliding), and the search refuses or is right.
-    case, detect = _detect(1000343)
-    model, how = straight_model(case)
+    model, how = straight_model(plants.replay_case(1000343))
     assert how == "identified"
-    ident = model.identification[1]
-    assert "d_neg" in ident.unfixed
-    try:
-        r = detect()
-    except ShiftDetectionError:
-        return
-    assert r.offset == pytest.approx(case.offset, abs=0.5)
+    assert "d_neg" in model.identification[1].unfixed
+    _right_or_refused(1000343)
 
 
 def test_a_held_load_read_as_the_no_load_level_does_not_make_the_unloading_an_edge():
@@ -117,9 +113,4 @@ def test_a_held_load_read_as_the_no_load_level_does_not_make_the_unloading_an_ed
     # read the positive tendon's held load (its tip on a 15.7-deg backlash plateau across the
     # 17-deg dead zone) as the no-load level moving down, 97 mA off; the replay starts with that
     # tendon taut and the search took its unloading for the negative edge: -1.55 deg, true -9.24.
-    case, detect = _detect(1400205)
-    try:
-        r = detect()
-    except ShiftDetectionError:
-        return
-    assert r.offset == pytest.approx(case.offset, abs=0.5)
+    _right_or_refused(1400205)
