@@ -606,6 +606,16 @@ def test_no_load_levels_are_read_where_the_tip_rests_on_a_dead_zone_flat():
         assert abs(level - c0) <= 4 * noise
 
 
+def test_current_only_a_stretch_ending_in_the_dead_zone_starts_its_dead_zone_after_the_unloading():
+    # held-out plant 1500263 (examined in stop 21; pretensioned tip-load, one cycle): the stretch
+    # down from the top reversal holds the load for 5.8 deg, unloads at 10 mA/deg over 6 deg and
+    # ends in the dead zone (0.7 mA/deg), whose last 1.6 deg the segmentation split off as a still
+    # flatter piece. Taken for the dead zone, that left the dead zone itself as the unloading and
+    # the true unloading as the backlash: b_pos 12.00 +- 0.3 deg, true 5.84.
+    case, fit = _zoo_current_fit(1500263)
+    _assert_within(fit, case.truth, ("b_pos", "b_neg", "d_pos"))
+
+
 def test_current_only_judges_a_wall_against_the_loaded_slope_of_the_reversal_stretches():
     from hystcli.io import parse_run
     from hystcli.zoo import plants
