@@ -263,14 +263,19 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     """
     if not from_reversal or dead is None:
         return None, False, None
-    # the dead zone may span several flat pieces: start from its first. Flat against the loaded
-    # slope after it or, in a stretch that ends in the dead zone, against the unloading before it
-    # (nothing but dead zone follows a tendon's unloading short of the other edge: held-out
-    # 1500263, whose stretch ended on a flatter piece, read the dead zone itself as the unloading
-    # and its 6 deg of true unloading as backlash, 6.2 deg off)
-    ref = slopes[dead + 1] if dead + 1 < len(slopes) else max(slopes[:dead], default=0.0)
-    while dead > 1 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(ref, 1e-12):
-        dead -= 1
+    # the dead zone may span several flat pieces: start from its first
+    if dead + 1 < len(slopes):
+        ref = slopes[dead + 1]          # the loaded slope after the dead zone
+        while dead > 1 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(ref, 1e-12):
+            dead -= 1
+    else:
+        # a stretch that ends in the dead zone: a piece before the last, flat against the piece
+        # before it, is where the unloading ended (held-out 1500263, whose stretch ended on a
+        # flatter piece, read the dead zone itself as the unloading and its 6 deg of true
+        # unloading as backlash, 6.2 deg off); one that merely softens is the unloading's tail
+        # (the twin's one-cycle sweep: 3.0 then 2.3 mA/deg)
+        while dead > 2 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(slopes[dead - 2], 1e-12):
+            dead -= 1
     if dead < 2:
         return None, False, None
     # the unloading slope: the longest piece before the dead zone, with its neighbours of about
