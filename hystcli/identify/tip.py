@@ -35,7 +35,12 @@ Fit
    filtered tracker makes neighbouring samples share their noise).
 4. Identifiability: a parameter the record cannot fix (its Jacobian column vanishes, or its
    uncertainty is a sizeable part of the swept range, or the loaded stretch that fixes it is
-   missing) is named with the reason, never returned silently.
+   missing) is named with the reason, never returned silently. A dead-zone edge is claimed only
+   where the record shows its flat: enough independent noise draws on it (samples over the
+   residuals' autocorrelation time, :data:`FLAT_CONTRAST`), a flat longer than the knob travels
+   within that time (a filter rounds a corner over that much), and a fit that worsens when the
+   edge slides along its loaded line (:data:`SLIDE_CHI2`); else it *slides* (the model predicts,
+   but the edge is no reference for Algorithm 1).
 """
 from __future__ import annotations
 
