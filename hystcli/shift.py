@@ -37,7 +37,8 @@ real current is not one law:
   (:func:`~hystcli.current.loading_edge` with ``strict_flat`` and ``select``: as many straight
   pieces as the readings' noise pays for, the flat stretch without the unloading that led into
   it); its edge is taken once the loaded stretch past it is long, or when the search can go no
-  further.
+  further. A kink gentler than :math:`\\epsilon_{lower}` after which the current steepens to a
+  taut tendon's slope is the curvature of a pretensioned dead zone's current, not the edge.
 * **whether to believe it.** Every offset carries its evidence (:class:`Evidence`): how clear
   the kink is (jump in slope over its standard error), the fit's residual against the readings'
   own noise, the current level at the kink against the no-load level, the slopes either side.
@@ -53,7 +54,9 @@ real current is not one law:
   plateau (its level above the no-load band, in degrees of the loaded slope). A flat below the
   band (a no-load level lying off the sweep's: speed, backlash on the sweep's dead zone) counts
   once the current has gone as far past the no-load level as the flat sat short of it, which an
-  unloading tendon never does. When the evidence is weak, the search refuses with the reason
+  unloading tendon never does; and a flat short of the no-load level on the side of the tendon
+  behind, past the search's own band, may be that tendon still taut, handing over to the other
+  at the same slope: how far on the edge would then lie enters the offset's standard error. When the evidence is weak, the search refuses with the reason
   (:class:`ShiftDetectionError`, exit 1) rather than return an offset: a wrong offset makes
   compensation worse than none.
 * **where to look.** A search that began slack and meets a taut tendon with no edge to take on
