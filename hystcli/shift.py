@@ -56,9 +56,9 @@ real current is not one law:
   once the current has gone as far past the no-load level as the flat sat short of it, which an
   unloading tendon never does; and a flat short of the no-load level on the side of the tendon
   behind, past the search's own band, may be that tendon still taut, handing over to the other
-  at the same slope: how far on the edge would then lie enters the offset's standard error. When the evidence is weak, the search refuses with the reason
-  (:class:`ShiftDetectionError`, exit 1) rather than return an offset: a wrong offset makes
-  compensation worse than none.
+  at the same slope: how far on the edge would then lie enters the offset's standard error.
+  When the evidence is weak, the search refuses with the reason (:class:`ShiftDetectionError`,
+  exit 1) rather than return an offset: a wrong offset makes compensation worse than none.
 * **where to look.** A search that began slack and meets a taut tendon with no edge to take on
   the way (an edge a step or two from the start, or one too faint or too unsure to take) crosses
   the dead zone to the other edge, as from a taut start; so does one whose edge the model cannot
@@ -886,21 +886,20 @@ class _Search:
         # loading runs through the no-load level as one straight line, where an unloading that
         # hands over to the other tendon changes slope there (two tendons, two slopes).
         flat_span = self.dir * (kink.at - self.seg_q[0])
-        if (self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0
-                and (-lvl - band_wide) / kink.after > MAX_OFFSET_SE
-                and not self._one_line_through(kink, c0)):
-            return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond the "
-                            f"no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: that "
-                            "tendon still taut on its backlash plateau, the rise its unloading")
-        # Inside that band but off the kink's own, the flat may still be the tendon behind held
-        # taut: its rise then runs on through the no-load level in one line when the other tendon
-        # takes over there (a backlash plateau as wide as the dead zone), and the edge lies where
-        # the rise crosses the no-load level, as far on as the flat sits short of it in degrees
-        # of the slope. That distance is how surely the kink places the edge: past MAX_OFFSET_SE
-        # the kink is refused (held-out null replay 1000327: a flat 14 mA short of the no-load
-        # level, inside a fast sweep's 24 mA band, gave an offset of -2.1 deg).
         behind = 0.0
         if self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0:
+            if (-lvl - band_wide) / kink.after > MAX_OFFSET_SE and not self._one_line_through(kink, c0):
+                return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond "
+                                f"the no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: "
+                                "that tendon still taut on its backlash plateau, the rise its unloading")
+            # Inside that band, or through the no-load level in one line, but off the kink's own
+            # band, the flat may still be the tendon behind held taut: its rise then runs on
+            # through the no-load level in one line when the other tendon takes over there (a
+            # backlash plateau as wide as the dead zone), and the edge lies where the rise crosses
+            # the no-load level, as far on as the flat sits short of it in degrees of the slope.
+            # That distance is how surely the kink places the edge: past MAX_OFFSET_SE the kink is
+            # refused (held-out null replay 1000327: a flat 14 mA short of the no-load level,
+            # inside a fast sweep's 24 mA band, gave an offset of -2.1 deg).
             behind = max(-lvl - band_own, 0.0) / kink.after
             if behind > MAX_OFFSET_SE:
                 return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, "

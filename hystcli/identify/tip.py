@@ -855,12 +855,11 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         # filter rounds a corner over that much, and a flat no longer is the fit trading the
         # rounding for an edge
         memory = float(np.median(np.abs(np.diff(q[m])))) * max(tau, 1.0) if m.sum() >= 2 else 0.0
-        if (m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST or hi_ - lo_ < FLAT_WIDTH
-                or seen < memory):
+        faint = m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST
+        if faint or hi_ - lo_ < FLAT_WIDTH or seen < memory:
             why = ("no longer than the knob travels within the tracker's own memory "
                    f"({memory:.2f} deg over {tau:.0f} samples), as a filter rounds a corner"
-                   if seen < memory and not (m.sum() < FLAT_SAMPLES or contrast < FLAT_CONTRAST) else
-                   "too little against the tracker's noise")
+                   if seen < memory and not faint else "too little against the tracker's noise")
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
                             f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the "
                             f"{seen:.2f} deg it travels ({why}): the edge cannot be placed apart from the "
