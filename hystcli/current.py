@@ -326,6 +326,32 @@ def pieces(x: np.ndarray, v: np.ndarray, minlen: int,
     return out
 
 
+HELD_LEAD = 2.0
+"""Knob travel (deg) after a reversal within which a held plateau must begin (:func:`_held_plateau`):
+an immediate drop (the sheath friction flipping over a fraction of a degree) or the motor's own
+Coulomb flip may come first; anything longer is not the backlash phase."""
+
+
+def unloads_after_level(pieces, slopes, x, k: int, flat: float, sig: float) -> bool:
+    """Whether piece ``k`` is a tendon unloading out of a held plateau rather than part of the dead
+    zone: a level piece (a degree or more, at most 0.15 of its slope, beginning within
+    :data:`HELD_LEAD` of the stretch's start, the reversal) right before it, and its own fall more
+    than twice the dead zone's slope ``flat`` and clear of the noise ``sig`` over its length.
+
+    A capstan's friction can make the unloading much gentler than the loading (design seed
+    2098: 4.0 against 20.5 mA/deg), so flatness against the loaded slope alone merges
+    it into the dead zone; a pretensioned dead zone whose curve softens piece by piece has no
+    level piece before it, and a dead zone met degrees after the reversal, before a loading piece
+    that levels off short of a wall (design seed 245), is not a held plateau.
+    """
+    if k < 1 or x[pieces[k - 1][0]] - x[pieces[0][0]] > HELD_LEAD:
+        return False
+    span = x[pieces[k][1] - 1] - x[pieces[k][0]]
+    span_before = x[pieces[k - 1][1] - 1] - x[pieces[k - 1][0]]
+    unloads = abs(slopes[k]) > 2.0 * abs(flat) and abs(slopes[k] - flat) * span > 6.0 * sig
+    return bool(unloads and abs(slopes[k - 1]) <= 0.15 * abs(slopes[k]) and span_before >= 1.0)
+
+
 def edge_piece(pieces, slopes, xb, sig) -> int | None:
     """Index of the flat piece that the loading edge ends (see the module docstring)."""
     n = len(pieces)
@@ -421,7 +447,8 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
             sxx_k, sxx_j = _sxx(x[pcs[k][0]:pcs[k][1]]), _sxx(x[pcs[j][0]:pcs[j][1]])
             same = (sxx_k > 0 and sxx_j > 0
                     and abs(slopes[k] - slopes[j]) <= 3.0 * sig * math.sqrt(1.0 / sxx_k + 1.0 / sxx_j))
-            if not same and abs(slopes[k] - slopes[j]) > 0.2 * (slopes[j + 1] - slopes[j]):
+            if not same and (abs(slopes[k] - slopes[j]) > 0.2 * (slopes[j + 1] - slopes[j])
+                             or unloads_after_level(pcs, slopes, x, k, slopes[j], sig)):
                 break
             first -= 1
     a0 = pcs[first][0]

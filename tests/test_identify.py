@@ -769,3 +769,68 @@ def test_current_only_backlash_from_a_noisy_plateau_end_is_within_a_degree():
     case, fit = _zoo_current_fit(867)
     for name in ("b_pos", "b_neg"):
         assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 1.0, name
+
+
+def test_a_gentle_unloading_after_a_held_plateau_is_not_taken_into_the_dead_zone():
+    # read_current's pieces of one stretch from a reversal (hand-built from design seed 2098's,
+    # bins of 0.5 deg): an immediate drop (234 mA/deg, 0-1 deg), the held plateau (0.01, 1-16.5),
+    # the unloading (4.01 mA/deg over 41 deg: a capstan's friction makes it five times gentler
+    # than the loading), the dead zone (-0.01), the loading (20.5). The unloading is flatter than
+    # FLAT_AFTER (0.35) of the loading; taken into the dead zone it left no backlash, and the
+    # record was refused. The backlash ends between the plateau and the unloading pieces:
+    # (16.0 + 16.5) / 2 = 16.25 deg
+    from hystcli.identify import current as IC
+
+    xb = np.arange(0.0, 123.0, 0.5)
+    pieces = [(0, 2), (2, 33), (33, 116), (116, 136), (136, 246)]
+    width, held, _ = IC._plateau(pieces, [234.0, 0.01, 4.01, -0.01, 20.5], xb, 0.05, True, 3)
+    assert held and width == pytest.approx(16.25)
+    # a pretensioned dead zone that softens piece by piece (design seed 1752, a stretch-following
+    # current: no backlash in it) has no level piece before its gentle pieces: no plateau is read
+    assert IC._plateau([(0, 12), (12, 26), (26, 45), (45, 52), (52, 62)], [4.56, 1.59, 1.28, 0.45, 5.81],
+                       xb, 0.05, True, 3)[0] is None
+
+
+def test_a_loading_edge_after_a_gentle_unloading_is_fitted_on_the_dead_zone_alone():
+    from hystcli.current import loading_edge
+
+    # one ascending stretch from a reversal, by hand: the other tendon's load held at -75 mA over
+    # 16 deg, unloaded at 3 mA/deg to the no-load level 0 at 41 deg, the dead zone to 50 deg, the
+    # tendon taken up at 20 mA/deg. The unloading is within a fifth of the jump of the dead zone's
+    # slope; fitted as part of the flat it put the edge 0.4 deg late with a residual of 34 noise
+    # sigmas
+    rng = np.random.default_rng(0)
+    x = np.arange(0.0, 70.0, 0.5)
+    c = np.where(x < 16, -75.0, np.where(x < 41, -75.0 + 3.0 * (x - 16), 0.0)) + np.where(x > 50, 20.0 * (x - 50), 0.0)
+    kink = loading_edge(x, c + rng.normal(0.0, 0.2, x.size), 1, 0.2, minlen=2, resolution=0.05)
+    assert abs(kink.at - 50.0) < 0.1
+    assert kink.residual < 2 * 0.2
+
+
+def test_current_only_reads_a_held_plateau_before_a_gentle_unloading():
+    # independent drop-at-reversal plant (design seed 2098): after each reversal the current drops,
+    # holds for the backlash (10.6 and 16.4 deg) and unloads five times more gently than it loads.
+    # The reading took that unloading into the dead zone and refused both backlashes
+    case, fit = _zoo_current_fit(2098)
+    _assert_within(fit, case.truth, ("d_pos", "d_neg", "b_pos", "b_neg"), tol=0.25)
+
+
+def test_current_only_an_unloading_kink_does_not_pull_the_no_load_level_off_the_true_edges():
+    # independent tip-load plant (design seed 1802): after one reversal the other tendon's held
+    # load starts to unload with a kink that looks like an edge. The no-load level was the median
+    # of the edges' levels alone, halfway between that kink and the true edge, and both fell
+    # outside it; the record's first stretch, the fallback, then carried the unloading kink too
+    case, fit = _zoo_current_fit(1802)
+    _assert_within(fit, case.truth, ("d_pos", "b_pos", "b_neg"))
+
+
+def test_current_only_refuses_an_edge_that_most_stretches_through_it_did_not_show():
+    # independent pretensioned plant (design seed 742): of the three stretches from a reversal that
+    # moved through d_pos, one showed a kink (0.65 deg early); it was returned as d_pos, and b_neg
+    # read with it 1.1 deg short
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(742, tip=False)
+    with pytest.raises(IdentificationError, match=r"d_pos is not an edge \(only 1 of the 3 stretches"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)

@@ -364,7 +364,8 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
         if doubt:
             # the stretches showed an edge, but one the record contradicts: say why it is not used
             raise IdentificationError(f"{where_k}: the current's d_{missing_edges[0]} is not an edge ({doubt}): "
-                                      "sweep a straight shaft with less pretension, or record the tip angle")
+                                      "record the tip angle, or sweep the straight shaft again (less pretension, more "
+                                      "cycles)")
         side = sides[missing_edges[0]]
         raise IdentificationError(
             f"{where_k}: the motor current never clearly shows the {side} tendon taken up (no jump in "

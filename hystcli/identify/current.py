@@ -30,7 +30,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..current import (FLAT_AFTER, MIN_CLARITY, Kink, arrival_edge, condition, edge_piece, kink_fit, loading_edge,
-                       pieces, robust_noise)
+                       pieces, robust_noise, unloads_after_level)
+from ..current import HELD_LEAD  # noqa: F401 - re-exported: the held plateau's lead-in is one idea
 from ..io import Run
 from .sweep import SweepCheck
 
@@ -266,7 +267,14 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     # the dead zone may span several flat pieces: start from its first
     if dead + 1 < len(slopes):
         ref = slopes[dead + 1]          # the loaded slope after the dead zone
-        while dead > 1 and abs(slopes[dead - 1]) <= FLAT_AFTER * max(ref, 1e-12):
+        own = slopes[dead]
+
+        def same_dead_zone(k: int) -> bool:
+            # flat against the loaded slope, and not a tendon unloading out of a held plateau
+            return (abs(slopes[k]) <= FLAT_AFTER * max(ref, 1e-12)
+                    and not unloads_after_level(pieces, slopes, xb, k, own, sig))
+
+        while dead > 1 and same_dead_zone(dead - 1):
             dead -= 1
     else:
         # a stretch that ends in the dead zone: a piece before the last, flat against the piece
@@ -335,12 +343,6 @@ def _level(slope: float, background: float, rel: float) -> bool:
     pretensioned tendon's spring, or the motor's viscous term following the sine's speed, tilt the
     plateau the same as the dead zone: the load itself does not change)."""
     return min(abs(slope), abs(slope - background)) <= 0.15 * rel
-
-
-HELD_LEAD = 2.0
-"""Knob travel (deg) after a reversal within which a held plateau must begin (:func:`_held_plateau`):
-an immediate drop (the sheath friction flipping over a fraction of a degree) or the motor's own
-Coulomb flip may come first; anything longer is not the backlash phase."""
 
 
 HELD_RATIO = 2.0
@@ -448,9 +450,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     # per side, the edge readings kept: the dead-zone piece's |dC/dq| and the loaded slope at them
     tilt: dict[str, tuple[float, float]] = {}
     # the no-load current, roughly: the median level at which the stretches from a reversal saw
-    # a tendon taken up, both ways (a kink read where a held load starts to unload sits far
-    # from it, on the loaded side)
-    lv = [s.edge.level for s in stretches if s.edge is not None and s.from_reversal]
+    # a tendon taken up, both ways, and an unloading tendon's current meet the dead zone (a kink
+    # read where a held load starts to unload sits far from it, on the loaded side; with one
+    # edge read each way, one of them such a kink, the edges alone put the level halfway and
+    # both fell outside it: design seed 2005)
+    lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
     c0 = float(np.median(lv)) if lv else math.nan
     loaded_from_reversal = [s.loaded_slope for s in stretches if s.from_reversal and s.loaded_slope is not None]
     loaded_ref = float(np.median(loaded_from_reversal)) if loaded_from_reversal else math.nan
@@ -467,7 +471,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             # failed to show it: the first starts from a state the current cannot tell (a tendon
             # may be taut with the tip held on its plateau), and where a stretch from a known
             # reversal saw no edge there, the first one's kink is something else
-            first = [s.edge for s in stretches if s.direction == d and s.edge is not None]
+            first = [s.edge for s in stretches if s.direction == d and s.edge is not None and not s.from_reversal]
             passed = [s for s in stretches if s.direction == d and s.from_reversal and first
                       and d * (q[s.stop] - first[0].at) > 1.0]
             ks = first if not passed else []
@@ -482,12 +486,25 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             at = at[~off]
             se = np.array([k.se for k in ks])
             edges[side] = float(np.median(at))
-            spread = float(1.2533 * np.std(at, ddof=1) / math.sqrt(at.size)) if at.size > 1 else 0.0
-            # never finer than the bins it was read on: the kink fits' own error knows nothing of
-            # how the current law rounds the corner (filtering, a stiffening cable, the law itself)
-            edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size), 0.5 * resolution)
-            levels[d] = float(np.median([k.level for k in ks]))
-            tilt[side] = (float(np.median([abs(k.before) for k in ks])), float(np.median([k.after for k in ks])))
+            # the stretches from a reversal that moved through the edge this way: a tendon is taken
+            # up on each of them, and an edge that only one in two (or fewer) showed is the
+            # current's waviness as likely as the edge (design seed 334: ripple of 3 mA on a
+            # 2 mA/deg load; one of two crossings read d_neg 1.3 deg late, the other nothing)
+            crossed = sum(1 for s in stretches if s.direction == d and s.from_reversal
+                          and float(np.min(q[s.start:s.stop + 1])) <= edges[side] - 1.0
+                          and float(np.max(q[s.start:s.stop + 1])) >= edges[side] + 1.0)
+            if side not in first_only and crossed >= 3 and 2 * len(ks) < crossed:
+                doubts[f"d_{side}"] = (f"only {len(ks)} of the {crossed} stretches that moved through it showed "
+                                       f"the kink at {edges.pop(side):.2f} deg: the current's waviness as likely "
+                                       "as the edge")
+            else:
+                spread = float(1.2533 * np.std(at, ddof=1) / math.sqrt(at.size)) if at.size > 1 else 0.0
+                # never finer than the bins it was read on: the kink fits' own error knows nothing
+                # of how the current law rounds the corner (filtering, a stiffening cable, the law)
+                edges_se[side] = max(spread, float(np.median(se)) / math.sqrt(at.size), 0.5 * resolution)
+                levels[d] = float(np.median([k.level for k in ks]))
+                tilt[side] = (float(np.median([abs(k.before) for k in ks])),
+                              float(np.median([k.after for k in ks])))
         # a plateau after the top reversal (descending) is B_pos, after the bottom one B_neg
         # complete branches (reversal to reversal) first: a stretch cut by the record's end is
         # read on less travel
