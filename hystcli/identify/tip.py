@@ -40,7 +40,9 @@ Fit
    residuals' autocorrelation time, :data:`FLAT_CONTRAST`), a flat longer than the knob travels
    within that time (a filter rounds a corner over that much), and a fit that worsens when the
    edge slides along its loaded line (:data:`SLIDE_CHI2`); else it *slides* (the model predicts,
-   but the edge is no reference for Algorithm 1).
+   but the edge is no reference for Algorithm 1). Samples where the tip has sat at the flat's
+   level since the record's first sample do not count: the free start state could hold it there
+   above a lower flat.
 """
 from __future__ import annotations
 
@@ -847,6 +849,16 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         if name in out:
             continue
         m = mask & (q >= lo_) & (q <= hi_)
+        # a tip at the flat's level (within its noise) since the record's first sample may as
+        # well be held there by its unknown start state (the fit's start is free), with the flat
+        # anywhere below it and the edge slid along the loaded line to match: those samples fix
+        # the line, not the flat (held-out 1900387: a record that started with the negative
+        # tendon taut and passed the rising dead zone only from that start; the fit joined its
+        # flat 0.014 deg above the start and put d_pos 0.68 deg off at +-0.01)
+        level = -0.5 * dh if name == "d_pos" else 0.5 * dh
+        away = np.abs(z - level) > 2.0 * noise / max(model.omega, 1e-3)
+        start_held = int(m[:int(np.argmax(away)) if away.any() else m.size].sum())
+        m[:int(np.argmax(away)) if away.any() else m.size] = False
         # the flat the tip actually travels: a record that only reaches a flat's end (its last
         # samples) sees the flat part from its loaded line over that span alone
         seen = float(np.ptp(q[m])) if m.sum() >= 2 else 0.0
@@ -860,6 +872,9 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
             why = ("no longer than the knob travels within the tracker's own memory "
                    f"({memory:.2f} deg over {tau:.0f} samples), as a filter rounds a corner"
                    if seen < memory and not faint else "too little against the tracker's noise")
+            if start_held:
+                why += (f"; {start_held} more sat at its level from the record's start, where the unknown "
+                        "start state may hold the tip")
             slides[name] = (f"the tip's {way} dead zone [{lo_:.2f}, {hi_:.2f}] deg holds {int(m.sum())} "
                             f"sample(s) of the fitted loop, a step of {model.omega * seen:.2f} deg of tip over the "
                             f"{seen:.2f} deg it travels ({why}): the edge cannot be placed apart from the "
