@@ -38,7 +38,9 @@ real current is not one law:
   pieces as the readings' noise pays for, the flat stretch without the unloading that led into
   it); its edge is taken once the loaded stretch past it is long, or when the search can go no
   further. A kink gentler than :math:`\\epsilon_{lower}` after which the current steepens to a
-  taut tendon's slope is the curvature of a pretensioned dead zone's current, not the edge.
+  taut tendon's slope is the curvature of a pretensioned dead zone's current, not the edge; nor
+  is a kink out of a flat that already climbs toward the tendon clearly steeper than the sweep's
+  dead zone (a stiffening cable's gentle start: the edge lies before it).
 * **whether to believe it.** Every offset carries its evidence (:class:`Evidence`): how clear
   the kink is (jump in slope over its standard error), the fit's residual against the readings'
   own noise, the current level at the kink against the no-load level, the slopes either side.
@@ -736,6 +738,11 @@ class _Search:
                             "curvature, the edge further on")
         from .current import JUMP_RATIO
 
+        early = self._loading_before(kink, noise)
+        if early is not None:
+            return REFUSE, (f"before the kink at {kink.at:.2f} deg the current already climbs toward the tendon at "
+                            f"{kink.before:.3g} mA/deg, {early:.1f} times the sweep's dead zone: a tendon taking load "
+                            "gently (a stiffening cable's start), the edge before the kink")
         if abs(kink.before) > JUMP_RATIO * kink.after:
             return REFUSE, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
                             f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
@@ -785,6 +792,24 @@ class _Search:
             return None
         slope = _ls_slope(q, c)
         return slope if self.th.eps_lower <= slope < self.th.eps_upper else None
+
+    def _loading_before(self, kink, noise: float) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
+        """How many times the sweep's dead-zone slope the flat before ``kink`` climbs toward the
+        tendon, when it does so clearly (three standard errors of its slope past that, and twice
+        it), else None: a stiffening cable takes load gently at first, and the kink is where it
+        steepens, after the edge (null replay 2000177, held out until examined in stop 22: 0.66 mA/deg
+        against the sweep's 0.12, the kink 1.2 deg past the edge; design replays 0-1999 gain one,
+        lose none)."""
+        dz = self.th.dead_zone_swing / self.th.half_width if self.th.half_width > 0 else 0.0
+        if not dz > 0 or not math.isfinite(noise) or not noise > 0:
+            return None
+        q = np.array(self.seg_q)
+        q = q[self.dir * (q - kink.at) < 0]
+        q = q[-kink.n_before:] if kink.n_before > 0 else q[:0]
+        if q.size < 3:
+            return None
+        se = noise / math.sqrt(float(np.sum((q - q.mean()) ** 2)) or math.inf)
+        return kink.before / dz if kink.before > max(2.0 * dz, dz + 3.0 * se) else None
 
     def _before_kink(self, kink) -> tuple[np.ndarray, np.ndarray]:  # noqa: ANN001 - hystcli.current.Kink
         """The segment's readings before ``kink``, and the kink's flat among them (its last

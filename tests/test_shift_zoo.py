@@ -114,3 +114,13 @@ def test_a_held_load_read_as_the_no_load_level_does_not_make_the_unloading_an_ed
     # 17-deg dead zone) as the no-load level moving down, 97 mA off; the replay starts with that
     # tendon taut and the search took its unloading for the negative edge: -1.55 deg, true -9.24.
     _right_or_refused(1400205)
+
+
+def test_a_kink_after_a_stiffening_cables_gentle_start_is_no_edge():
+    # held-out null replay 2000177 (examined in stop 22): a stiffening cable takes its load
+    # gently at first; the readings before the kink at -4.01 deg already climb toward the tendon
+    # at 0.66 mA/deg, five times the sweep's dead zone (0.12), and the kink, where the cable
+    # steepens (5.1 mA/deg), lies 1.2 deg past the true edge (-2.81): an offset of -1.20 deg on an
+    # unshifted replay. The shift is 0.
+    assert plants.replay_case(2000177).offset == 0.0
+    _right_or_refused(2000177)
