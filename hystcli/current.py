@@ -327,7 +327,8 @@ def pieces(x: np.ndarray, v: np.ndarray, minlen: int,
 
 
 HELD_LEAD = 2.0
-"""Knob travel (deg) after a reversal within which a held plateau must begin (:func:`_held_plateau`):
+"""Knob travel (deg) after a reversal within which a held plateau must begin
+(:func:`hystcli.identify.current._held_plateau`, :func:`unloads_after_level`):
 an immediate drop (the sheath friction flipping over a fraction of a degree) or the motor's own
 Coulomb flip may come first; anything longer is not the backlash phase."""
 

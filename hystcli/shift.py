@@ -373,6 +373,11 @@ class Thresholds:
         """The loaded slope the thresholds were made from (eps_upper is five times it)."""
         return self.eps_upper / 5.0
 
+    @property
+    def slope_dead_zone(self) -> float:
+        """The sweep's dead-zone slope ``|dC/dq|`` (mA/deg) the swing was made from, 0 when unknown."""
+        return self.dead_zone_swing / self.half_width if self.half_width > 0 else 0.0
+
     def spread(self, moving: bool) -> float:
         """How far (mA) the no-load level may lie from :meth:`no_load`'s for the motor's own
         friction: none moving (that direction's level is known); at rest, half the gap between
@@ -800,7 +805,7 @@ class _Search:
         steepens, after the edge (null replay 2000177, held out until examined in stop 22: 0.66 mA/deg
         against the sweep's 0.12, the kink 1.2 deg past the edge; design replays 0-1999 gain one,
         lose none)."""
-        dz = self.th.dead_zone_swing / self.th.half_width if self.th.half_width > 0 else 0.0
+        dz = self.th.slope_dead_zone
         if not dz > 0 or not math.isfinite(noise) or not noise > 0:
             return None
         q = np.array(self.seg_q)

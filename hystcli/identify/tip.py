@@ -857,8 +857,9 @@ def _unidentified(th: np.ndarray, model: KnobModel, q: np.ndarray, stderr: dict[
         # flat 0.014 deg above the start and put d_pos 0.68 deg off at +-0.01)
         level = -0.5 * dh if name == "d_pos" else 0.5 * dh
         away = np.abs(z - level) > 2.0 * noise / max(model.omega, 1e-3)
-        start_held = int(m[:int(np.argmax(away)) if away.any() else m.size].sum())
-        m[:int(np.argmax(away)) if away.any() else m.size] = False
+        lead = int(np.argmax(away)) if away.any() else m.size
+        start_held = int(m[:lead].sum())
+        m[:lead] = False
         # the flat the tip actually travels: a record that only reaches a flat's end (its last
         # samples) sees the flat part from its loaded line over that span alone
         seen = float(np.ptp(q[m])) if m.sum() >= 2 else 0.0
