@@ -24,6 +24,15 @@ What counts, per case:
   than the other three quarters shows as that) is not in the current.
 * 2-sigma coverage: the share of returned parameters whose truth lies within two standard errors.
 
+* **detect-shift** (replays): *within 0.5 deg* of the plant's true shift, *0.5-2 deg*, or a *silent
+  failure* (exit 0, more than 2 deg off); refusals are split by whether the edge the search has
+  to find lies within its travel limit and the replay (*reach*, :func:`edge_reachable`: the
+  issue's denominator) or not. A second rate keeps, of the reachable cases, those whose edge
+  *any* method could place: the plant's own noiseless replay, read the way the search reads,
+  places the kink to +-0.25 deg at the Cramer-Rao bound (:func:`edge_placeable_se`), and the
+  straight model has that edge (its identification did not leave it unplaced). Offsets returned
+  more than 0.5 deg off count against both rates, whatever the information.
+
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
   searched by ``hyst detect-shift --port`` (the first 40 of ``--n``).
 
@@ -232,6 +241,110 @@ def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> boo
     return abs(far - start) <= travel and covered
 
 
+PLACEABLE_SE = 0.25
+"""Largest standard error (deg) at which the true kink could still be placed within 0.5 deg (two
+of them): the same half degree the rate is judged at."""
+
+
+def _probe_readings(rep, start: float, d: int, far: float, step: float = 0.5) -> np.ndarray:
+    """(q, current) of the probe at ``start`` and stepped from there toward ``far`` by ``step``, as
+    far as the record goes: the readings any search that way could have."""
+    probe = shift.ReplayProbe(rep, 1)
+    first = probe.read()
+    out = [(first.q, first.current)]
+    k = 1
+    while d * (start + d * step * k - far) <= 1e-9:
+        try:
+            s = probe.step_to(start + d * step * k)
+        except shift.ReplayExhausted:
+            break
+        out.append((s.q, s.current))
+        k += 1
+    return np.array(out, dtype=float).reshape(-1, 2)
+
+
+def _kink_bound(rep, rep0, start: float, need: float, begin: float, travel: float) -> float:
+    """Cramer-Rao bound (deg) of the kink at ``need`` on the pass from ``start`` (see
+    :func:`edge_placeable_se`); ``begin``: where the dead zone's flat begins on that pass."""
+    d = 1 if need > start else -1
+    noisy = _probe_readings(rep, start, d, start + d * travel)
+    true = _probe_readings(rep0, start, d, start + d * travel)
+    m = min(len(noisy), len(true))
+    x = d * (true[:m, 0] - need)
+    sel = x >= d * (begin - need) - 1e-9
+    if np.sum(sel & (x < 0)) < 2 or np.sum(sel & (x > 0)) < 2:
+        return math.inf
+    dev = noisy[:m, 1] - true[:m, 1]
+    sig = 1.4826 * float(np.median(np.abs(dev - np.median(dev))))
+    return hinge_bound(x[sel], true[:m, 1][sel], sig)
+
+
+def hinge_bound(x: np.ndarray, c: np.ndarray, sig: float) -> float:
+    """Cramer-Rao bound (deg) of the kink of ``c = a + s0 x + s1 x+`` at ``x = 0`` from readings
+    at ``x`` (deg from the true kink) whose true values are ``c`` (mA), with white noise ``sig``.
+
+    The lines are the least-squares ones through ``c`` with the kink held at 0; the bound is the
+    kink's entry of the inverse Fisher information of (a, s0, s1, kink) at those lines."""
+    x = np.asarray(x, float)
+    a = np.column_stack([np.ones_like(x), x, np.maximum(x, 0.0)])
+    beta, *_ = np.linalg.lstsq(a, np.asarray(c, float), rcond=None)
+    jac = np.column_stack([a, -(beta[1] + beta[2] * (x > 0))])
+    try:
+        var = float(np.linalg.inv(jac.T @ jac)[3, 3])
+    except np.linalg.LinAlgError:
+        return math.inf
+    return max(sig, 1e-12) * math.sqrt(max(var, 0.0))
+
+
+def edge_placeable_se(case: plants.ReplayCase, travel: float) -> float:
+    """How well *any* method could place the kink at an edge the search can use, on the truth.
+
+    The plant's own noiseless replay (the same draws without the sensor's noise) stepped the way
+    the search goes (:func:`edge_reachable`) gives the true readings; the noisy replay stepped the
+    same way gives their noise. A continuous two-line fit through the true readings at the true
+    edge (the whole dead-zone flat of that pass, the whole loaded stretch up to the travel limit)
+    then gives, from its Fisher information at the readings' noise, the smallest standard error an
+    unbiased estimate of the kink can have on these readings (the Cramer-Rao bound). Where the
+    edge the record goes to first is too near the start for a flat before it (fewer than two
+    readings), the search crosses the dead zone to the other edge, and that edge's bound counts.
+    ``inf`` when neither has two readings on each side within the travel limit. The bound is
+    optimistic where the current is not two straight lines, so it counts such a case placeable:
+    it never leaves out a case a method could have got right."""
+    case0 = plants.replay_case(case.seed, case.family, noiseless=True)
+    rep = parse_run(case.replay.csv_text(), source="noisy")
+    rep0 = parse_run(case0.replay.csv_text(), source="noiseless")
+    q = np.asarray(rep["q1"], float)
+    tr, o = case.truth, case.offset
+    start, e_pos, e_neg = float(q[0]), tr.d_pos + o, tr.d_neg + o
+    moves = np.flatnonzero(np.abs(q - start) > 1e-9)
+    first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
+    if e_neg < start < e_pos:
+        near, far_edge = (e_pos, e_neg) if first > 0 else (e_neg, e_pos)
+        bound = _kink_bound(rep, rep0, start, near, start, travel)
+        if math.isinf(bound):
+            bound = _kink_bound(rep, rep0, start, far_edge, start, travel)
+        return bound
+    need, begin = (e_neg, e_pos) if start >= e_pos else (e_pos, e_neg)
+    return _kink_bound(rep, rep0, start, need, begin, travel)
+
+
+def model_lacks_edge(model: Model, case: plants.ReplayCase, q: np.ndarray) -> bool:
+    """Whether the straight model's identification left the edge the search needs unplaced (its
+    sweep could not fix it): then no offset can be measured from it, whatever the replay shows."""
+    ident = (model.identification or {}).get(1)
+    if ident is None or not getattr(ident, "unfixed", ()):
+        return False
+    tr, o = case.truth, case.offset
+    start, e_pos, e_neg = float(q[0]), tr.d_pos + o, tr.d_neg + o
+    moves = np.flatnonzero(np.abs(q - start) > 1e-9)
+    first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
+    if e_neg < start < e_pos:
+        name = "d_pos" if first > 0 else "d_neg"
+    else:
+        name = "d_neg" if start >= e_pos else "d_pos"
+    return name in ident.unfixed
+
+
 def straight_model(case: plants.ReplayCase) -> tuple[Model, str]:
     """The model a user would have: identified on the straight sweep (tip fit); when the sweep
     cannot identify it, the true loop with the current levels read on that sweep."""
@@ -250,6 +363,7 @@ def bench_shift(n: int, seed: int) -> None:
     errs: list[float] = []
     nulls: list[float] = []
     silent: list[str] = []
+    unplaceable: dict = defaultdict(int)
     t0 = time.perf_counter()
     for s in range(seed, seed + n):
         case = plants.replay_case(s)
@@ -259,10 +373,19 @@ def bench_shift(n: int, seed: int) -> None:
         travel = shift.default_max_travel(model, 1)
         reach = edge_reachable(case, np.asarray(rep["q1"], float), travel)
         key = "reach" if reach else "beyond"
+        # whether the truth's readings could place the edge at all, and whether the model has it
+        why_not = None
+        if reach:
+            if model_lacks_edge(model, case, np.asarray(rep["q1"], float)):
+                why_not = "model"
+            elif edge_placeable_se(case, travel) > PLACEABLE_SE:
+                why_not = "readings"
         try:
             r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
         except HystError:
             stats[fam][f"refused ({key})"] += 1
+            if why_not:
+                unplaceable[f"refused, {why_not}"] += 1
             continue
         e = r.offset - case.offset
         if case.offset == 0.0:
@@ -270,6 +393,8 @@ def bench_shift(n: int, seed: int) -> None:
         if abs(e) <= 0.5:
             stats[fam][f"ok ({key})"] += 1
             errs.append(abs(e))
+            if why_not:
+                unplaceable[f"ok, {why_not}"] += 1
         elif abs(e) <= 2.0:
             stats[fam]["0.5-2 deg"] += 1
             errs.append(abs(e))
@@ -296,6 +421,18 @@ def bench_shift(n: int, seed: int) -> None:
           f"cases whose edge is reachable or that returned an offset; silent failures (exit 0, error > 2 deg): "
           f"{total['silent > 2 deg']}; median |error| {np.median(errs) if errs else math.nan:.3f} deg, "
           f"worst {max(errs) if errs else math.nan:.2f}")
+    # the same rate over the reachable cases whose edge the readings could place at all (judged on
+    # the plant's truth) and the straight model has; returned offsets off by more than 0.5 deg count
+    # whatever the information was
+    ok_p = total["ok (reach)"] - unplaceable["ok, readings"] - unplaceable["ok, model"]
+    ref_p = total["refused (reach)"] - unplaceable["refused, readings"] - unplaceable["refused, model"]
+    den_p = ok_p + ref_p + total["0.5-2 deg"] + total["silent > 2 deg"]
+    print(f"placeable (the true readings place the needed edge to +-{PLACEABLE_SE} deg at the Cramer-Rao "
+          f"bound, and the straight model has that edge): {ok_p} of {den_p} within 0.5 deg "
+          f"({100 * ok_p / max(den_p, 1):.1f} %), {ref_p} refused; the reachable cases left out: "
+          f"readings too weak {unplaceable['refused, readings']} refused and {unplaceable['ok, readings']} right, "
+          f"edge unplaced by the straight sweep's identification {unplaceable['refused, model']} refused "
+          f"and {unplaceable['ok, model']} right")
     if nulls:
         print(f"null cases (no shift): {len(nulls)} returned, |offset| worst {max(nulls):.3f} deg")
     for line in silent:
