@@ -364,6 +364,7 @@ def bench_shift(n: int, seed: int) -> None:
     nulls: list[float] = []
     silent: list[str] = []
     unplaceable: dict = defaultdict(int)
+    cover: list[bool] = []
     t0 = time.perf_counter()
     for s in range(seed, seed + n):
         case = plants.replay_case(s)
@@ -390,6 +391,11 @@ def bench_shift(n: int, seed: int) -> None:
         e = r.offset - case.offset
         if case.offset == 0.0:
             nulls.append(abs(r.offset))
+        # the offset's own standard error: its kink's and its model edge's (identify's), combined
+        ident = (model.identification or {}).get(1)
+        m_se = (ident.stderr.get(f"d_{r.edge}", 0.0) if ident is not None and ident.stderr else 0.0)
+        if r.evidence is not None:
+            cover.append(abs(e) <= 2.0 * math.hypot(r.evidence.edge_se, m_se))
         if abs(e) <= 0.5:
             stats[fam][f"ok ({key})"] += 1
             errs.append(abs(e))
@@ -433,6 +439,9 @@ def bench_shift(n: int, seed: int) -> None:
           f"readings too weak {unplaceable['refused, readings']} refused and {unplaceable['ok, readings']} right, "
           f"edge unplaced by the straight sweep's identification {unplaceable['refused, model']} refused "
           f"and {unplaceable['ok, model']} right")
+    if cover:
+        print(f"the true shift within two of the offset's standard errors (its kink's edge_se and its "
+              f"model edge's, combined): {100 * np.mean(cover):.1f} % of {len(cover)} offsets")
     if nulls:
         print(f"null cases (no shift): {len(nulls)} returned, |offset| worst {max(nulls):.3f} deg")
     for line in silent:

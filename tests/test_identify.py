@@ -803,6 +803,38 @@ def test_a_gentle_unloading_after_a_held_plateau_is_not_taken_into_the_dead_zone
                        xb, 0.05, True, 3)[0] is None
 
 
+def test_a_motor_friction_flip_spread_by_a_slow_turn_is_no_backlash():
+    # read_current's pieces of one stretch from a reversal (hand-built from held-out 2100090's,
+    # bins of 0.5 deg): a steep fall (11.9 mA/deg, 0.25-2.25 deg), the unloading (4.5 over 42 deg),
+    # the dead zone (1.0), the loading (3.8). A sine sweep of 51 deg amplitude at 3.2 deg/s turns
+    # so slowly that the motor's own Coulomb friction flips over the first 1.6 deg (where the knob
+    # is slower than a quarter of its peak speed): the fall is that flip, 2.0 deg long, no
+    # sheath's. The plant's current follows the tendon's stretch and carries no backlash; read as
+    # a flip, b_pos came back 2.44 deg against the tip's 7.81.
+    from hystcli.identify import current as IC
+
+    xb = np.arange(0.25, 103.0, 0.5)
+    pieces = [(0, 5), (5, 90), (90, 107), (107, 200), (200, 205)]
+    slopes = [11.87, 4.48, 0.99, 3.8, -3.75]
+    assert IC._plateau(pieces, slopes, xb, 0.05, True, 2, slow_until=1.6)[0] is None
+    # the same fall where the knob was brisk from the reversal on goes past the motor's flip: a
+    # sheath's flip over the backlash, which ends where the unloading begins, (2.25 + 2.75) / 2
+    width, held, _ = IC._plateau(pieces, slopes, xb, 0.05, True, 2, slow_until=0.0)
+    assert width == pytest.approx(2.5) and not held
+
+
+def test_current_only_refuses_the_backlash_of_a_slow_turn_on_a_stretch_law():
+    # held-out plant 2100090 (examined after the 2100000 range's figures; design data since): its
+    # current follows the tendon's stretch, so no backlash is in it; stop 22's code returned b_pos
+    # 5.4 deg off at +-0.25 (exit 0)
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(2100090, tip=False)
+    with pytest.raises(IdentificationError, match="shows no backlash plateau"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
 def test_a_loading_edge_after_a_gentle_unloading_is_fitted_on_the_dead_zone_alone():
     from hystcli.current import loading_edge
 

