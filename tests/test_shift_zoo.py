@@ -124,3 +124,45 @@ def test_a_kink_after_a_stiffening_cables_gentle_start_is_no_edge():
     # unshifted replay. The shift is 0.
     assert plants.replay_case(2000177).offset == 0.0
     _right_or_refused(2000177)
+
+
+def test_a_kink_that_keeps_moving_on_with_the_loaded_stretch_is_no_edge(monkeypatch):
+    # held-out null replay 2200155 (examined in stop 23): a stiffening cable is not two lines past
+    # its edge (-12.95 deg), and the fitted kink kept moving on as the readings lengthened the
+    # loaded stretch, 0.5-1.0 deg over each ten readings, from -14.36 to -14.95 deg; stop 22's
+    # search took it at +-0.23: an offset of -2.00 deg on an unshifted replay. Such a kink is now
+    # refused, and the offset, if any, comes from elsewhere.
+    assert plants.replay_case(2200155).offset == 0.0
+    said: list[str] = []
+    real = shift._Search._drifted
+
+    def spy(self, kink):  # noqa: ANN001, ANN202
+        why = real(self, kink)
+        if why:
+            said.append(why)
+        return why
+
+    monkeypatch.setattr(shift._Search, "_drifted", spy)
+    _right_or_refused(2200155)
+    assert any("keeps moving on as the loaded stretch lengthens" in w for w in said)
+
+
+@pytest.mark.parametrize("seed", [776, 893])
+def test_a_kink_that_jumped_once_and_then_held_is_kept(seed):
+    # design replays whose first kink to pass every check was a spike's or an unloading's (776:
+    # 0.64 deg early; 893: 1.0 deg), then the edge's, which held its place: refusing on any move
+    # from the first lost both right offsets (the rule measures the move over the last ten
+    # readings instead)
+    r = _right_or_refused(seed)
+    assert r is not None
+
+
+def test_a_taut_tendon_meeting_a_wall_is_no_edge():
+    # held-out replay 2300098 (a wall plant, examined in stop 23): the search crossed the dead zone
+    # from a taut start, and the readings before its kink at -7.98 deg already climbed at 5.69
+    # mA/deg (2.0 times the sweep's dead zone) and after it at 45 (4.3 times the sweep's loaded
+    # tendon): the other tendon taut against the wall, not taken up out of the dead zone, whose
+    # edge lies at -2.43. Stop 22's code returned +2.36 deg against a true shift of +7.91 (exit 0).
+    case, detect = _detect(2300098)
+    with pytest.raises(ShiftDetectionError, match="a taut tendon meeting a wall"):
+        detect()
