@@ -40,7 +40,10 @@ real current is not one law:
   further. A kink gentler than :math:`\\epsilon_{lower}` after which the current steepens to a
   taut tendon's slope is the curvature of a pretensioned dead zone's current, not the edge; nor
   is a kink out of a flat that already climbs toward the tendon clearly steeper than the sweep's
-  dead zone (a stiffening cable's gentle start: the edge lies before it).
+  dead zone (a stiffening cable's gentle start: the edge lies before it), a kink that keeps moving
+  on as the loaded stretch lengthens (a stiffening cable past its edge: :data:`DRIFT_READINGS`),
+  or one from a climbing flat to a slope far past any tendon's (a taut tendon meeting a wall:
+  :data:`TAUT_BEFORE`, :data:`WALL_AFTER`).
 * **whether to believe it.** Every offset carries its evidence (:class:`Evidence`): how clear
   the kink is (jump in slope over its standard error), the fit's residual against the readings'
   own noise, the current level at the kink against the no-load level, the slopes either side.
