@@ -54,7 +54,7 @@ from hystcli import shift
 from hystcli.errors import HystError
 from hystcli.identify import current_levels, identify, tip
 from hystcli.identify.sweep import decimation_index
-from hystcli.io import parse_run
+from hystcli.io import Run, parse_run
 from hystcli.model import KnobModel, Model
 from hystcli.zoo import plants
 
@@ -217,24 +217,32 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
               "plateau' where every refused backlash is narrower than 1 deg")
 
 
-def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> bool:
-    """Whether the edge the search has to find lies within its travel limit and the replay.
+def needed_edge(case: plants.ReplayCase, q: np.ndarray) -> tuple[str, float, float, float]:
+    """The edge the search has to find, from the true state at the replay's start.
 
-    From the true state at the replay's start: in the shifted dead zone the search goes the way
-    the record goes first, to that edge; with the positive tendon taut it goes through
-    the dead zone to the negative edge, with the negative one taut to the positive edge. The
-    edge must be within the travel limit of the start (3 deg past it to confirm it) and the
-    replay must go that far: the denominator of the detection rate.
-    """
+    In the shifted dead zone the search goes the way the record goes first, to that edge; with
+    the positive tendon taut it goes through the dead zone to the negative edge, with the
+    negative one taut to the positive edge. Returns (its name, ``"d_pos"`` or ``"d_neg"``; where
+    it lies; where the dead zone's flat begins on the way there, the start or the other edge;
+    the other edge)."""
     tr, o = case.truth, case.offset
     start = float(q[0])
     e_pos, e_neg = tr.d_pos + o, tr.d_neg + o
     moves = np.flatnonzero(np.abs(q - start) > 1e-9)
     first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
-    if e_neg < start < e_pos:
-        need = e_pos if first > 0 else e_neg       # slack: the way the record goes first
-    else:
-        need = e_neg if start >= e_pos else e_pos  # taut: through the dead zone to the other edge
+    if e_neg < start < e_pos:                      # slack: the way the record goes first
+        return ("d_pos", e_pos, start, e_neg) if first > 0 else ("d_neg", e_neg, start, e_pos)
+    if start >= e_pos:                             # taut: through the dead zone to the other edge
+        return "d_neg", e_neg, e_pos, e_pos
+    return "d_pos", e_pos, e_neg, e_neg
+
+
+def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> bool:
+    """Whether the edge the search has to find (:func:`needed_edge`) lies within its travel limit
+    and the replay: within the travel limit of the start (3 deg past it to confirm it), and the
+    replay goes that far: the denominator of the detection rate."""
+    start = float(q[0])
+    need = needed_edge(case, q)[1]
     d = 1 if need > start else -1
     far = need + 3.0 * d
     covered = float(np.max(q)) >= far if d > 0 else float(np.min(q)) <= far
@@ -296,7 +304,7 @@ def hinge_bound(x: np.ndarray, c: np.ndarray, sig: float) -> float:
     return max(sig, 1e-12) * math.sqrt(max(var, 0.0))
 
 
-def edge_placeable_se(case: plants.ReplayCase, travel: float) -> float:
+def edge_placeable_se(case: plants.ReplayCase, rep: Run, travel: float) -> float:
     """How well *any* method could place the kink at an edge the search can use, on the truth.
 
     The plant's own noiseless replay (the same draws without the sensor's noise) stepped the way
@@ -309,40 +317,24 @@ def edge_placeable_se(case: plants.ReplayCase, travel: float) -> float:
     readings), the search crosses the dead zone to the other edge, and that edge's bound counts.
     ``inf`` when neither has two readings on each side within the travel limit. The bound is
     optimistic where the current is not two straight lines, so it counts such a case placeable:
-    it never leaves out a case a method could have got right."""
+    it never leaves out a case a method could have got right. ``rep``: the case's (noisy) replay,
+    parsed."""
     case0 = plants.replay_case(case.seed, case.family, noiseless=True)
-    rep = parse_run(case.replay.csv_text(), source="noisy")
     rep0 = parse_run(case0.replay.csv_text(), source="noiseless")
     q = np.asarray(rep["q1"], float)
-    tr, o = case.truth, case.offset
-    start, e_pos, e_neg = float(q[0]), tr.d_pos + o, tr.d_neg + o
-    moves = np.flatnonzero(np.abs(q - start) > 1e-9)
-    first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
-    if e_neg < start < e_pos:
-        near, far_edge = (e_pos, e_neg) if first > 0 else (e_neg, e_pos)
-        bound = _kink_bound(rep, rep0, start, near, start, travel)
-        if math.isinf(bound):
-            bound = _kink_bound(rep, rep0, start, far_edge, start, travel)
-        return bound
-    need, begin = (e_neg, e_pos) if start >= e_pos else (e_pos, e_neg)
-    return _kink_bound(rep, rep0, start, need, begin, travel)
+    start = float(q[0])
+    _, need, begin, other = needed_edge(case, q)
+    bound = _kink_bound(rep, rep0, start, need, begin, travel)
+    if math.isinf(bound) and begin == start:
+        bound = _kink_bound(rep, rep0, start, other, start, travel)
+    return bound
 
 
 def model_lacks_edge(model: Model, case: plants.ReplayCase, q: np.ndarray) -> bool:
     """Whether the straight model's identification left the edge the search needs unplaced (its
     sweep could not fix it): then no offset can be measured from it, whatever the replay shows."""
     ident = (model.identification or {}).get(1)
-    if ident is None or not getattr(ident, "unfixed", ()):
-        return False
-    tr, o = case.truth, case.offset
-    start, e_pos, e_neg = float(q[0]), tr.d_pos + o, tr.d_neg + o
-    moves = np.flatnonzero(np.abs(q - start) > 1e-9)
-    first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
-    if e_neg < start < e_pos:
-        name = "d_pos" if first > 0 else "d_neg"
-    else:
-        name = "d_neg" if start >= e_pos else "d_pos"
-    return name in ident.unfixed
+    return ident is not None and needed_edge(case, q)[0] in ident.unfixed
 
 
 def straight_model(case: plants.ReplayCase) -> tuple[Model, str]:
@@ -372,14 +364,15 @@ def bench_shift(n: int, seed: int) -> None:
         model, how = straight_model(case)
         rep = parse_run(case.replay.csv_text(), source=f"replay-{s}")
         travel = shift.default_max_travel(model, 1)
-        reach = edge_reachable(case, np.asarray(rep["q1"], float), travel)
+        q = np.asarray(rep["q1"], float)
+        reach = edge_reachable(case, q, travel)
         key = "reach" if reach else "beyond"
         # whether the truth's readings could place the edge at all, and whether the model has it
         why_not = None
         if reach:
-            if model_lacks_edge(model, case, np.asarray(rep["q1"], float)):
+            if model_lacks_edge(model, case, q):
                 why_not = "model"
-            elif edge_placeable_se(case, travel) > PLACEABLE_SE:
+            elif edge_placeable_se(case, rep, travel) > PLACEABLE_SE:
                 why_not = "readings"
         try:
             r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)

@@ -11,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from hystcli.io import parse_run
 from hystcli.zoo import plants
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -57,7 +58,8 @@ def test_a_kink_with_one_side_unread_has_no_bound():
 def test_edge_placeable_on_a_zoo_replay():
     # design replay 1 (pretension): its edge lies within the travel limit, and the search reads it
     case = plants.replay_case(1)
-    bound = zoo.edge_placeable_se(case, 54.0)
+    rep = parse_run(case.replay.csv_text(), source="replay-1")
+    bound = zoo.edge_placeable_se(case, rep, 54.0)
     assert 0.0 < bound <= zoo.PLACEABLE_SE
     # a travel limit of one step reads no loaded stretch past an edge away from the start
-    assert math.isinf(zoo.edge_placeable_se(case, 0.5))
+    assert math.isinf(zoo.edge_placeable_se(case, rep, 0.5))

@@ -202,8 +202,8 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         return out
     width = float(np.clip(travel / 80.0, 0.1, 0.5))
     speed = np.abs(np.gradient(qq, tt))
-    fast = ((speed >= SLOW * float(np.percentile(speed, 95)))
-            & (tt >= tt[0] + GUARD_S) & (tt <= tt[-1] - GUARD_S))
+    brisk = speed >= SLOW * float(np.percentile(speed, 95))
+    fast = brisk & (tt >= tt[0] + GUARD_S) & (tt <= tt[-1] - GUARD_S)
     # the plateau is read from the reversal on, the edge only where the knob moves briskly
     xa, va = _bins(x, cc, width)
     if fast.sum() < 12:
@@ -227,8 +227,7 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         sa = [d * m for (_, _, m, _) in pa]
         # where the knob, slow out of its reversal, first moves briskly: the motor's own friction
         # flips sign up to there, however far a slow turn takes it
-        brisk = np.flatnonzero(speed >= SLOW * float(np.percentile(speed, 95)))
-        slow_until = float(x[brisk[0]]) if brisk.size else 0.0
+        slow_until = float(x[np.argmax(brisk)]) if brisk.any() else 0.0
         plateau, held, span = _plateau(pa, sa, xp, sig, from_reversal,
                                        _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)),
                                        slow_until=slow_until)
