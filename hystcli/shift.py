@@ -28,7 +28,10 @@ real current is not one law:
   edge's, or the search refuses. (Used alone, it gave wrong offsets on 8 of 300 independent
   plants: ``bench/zoo.py``.)
   A start in the dead zone whose current turns out to be loading from the first steps turns round
-  the same way.
+  the same way. Where the far edge lies beyond reach (the travel limit, or where a record goes),
+  the search turns back once and takes the tendon it left up from the dead zone's flat, provided
+  that tendon has gone slack (its current back at the no-load level): a tendon still held or
+  still unloading is taken up again where the knob last turned, not at its edge.
 * **what an edge is.** On the readings since the last reversal, the loading edge is a jump in
   slope out of a flat (or pretensioned, gently sloped) stretch after which nothing flat follows
   (:func:`hystcli.current.loading_edge`, the reading identification uses too), placed by a
@@ -647,14 +650,18 @@ class _Search:
         self.seg_q: list[float] = []
         self.seg_c: list[float] = []
         self.seg_from_start = True
+        self.seg_back = False        # the segment walks back from where the search was stopped (_walk)
         self.contacts: list[float] = []
         self.start_outside = False
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
+        self.back: str | None = None  # why it turned back to the taut edge it had left (see _walk)
+        self.left: tuple[int, float] | None = None   # (side, knob angle) of the last taut tendon it turned from
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
         self.short = None            # (direction, kink): an edge at the start on a flat at the no-load level
         self.arrival = None          # where an unloading tendon's current met the dead zone
+        self.arrival_dir = 0         # the way the knob moved then (the walk back reads its edge the other way)
         self.plateaus = {1: 0.0, -1: 0.0}
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
         self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
@@ -699,6 +706,7 @@ class _Search:
         self.ready = None
         self.seg_q, self.seg_c = [], []
         self.seg_from_start = False
+        self.seg_back = False
         self.ready_log = []
 
     # -- the level ----------------------------------------------------------------------------
@@ -717,6 +725,7 @@ class _Search:
     def _turn_toward_slack(self, side: int) -> None:
         """A tendon is taut: head for the dead zone and through it to the other edge."""
         self.start_outside = True
+        self.left = (side, self.q)
         if self.dir == side:
             self._reverse()
 
@@ -965,7 +974,10 @@ class _Search:
         # hands over to the other tendon changes slope there (two tendons, two slopes).
         flat_span = self.dir * (kink.at - self.seg_q[0])
         behind = 0.0
-        if self.seg_from_start and kink.after > 0 and flat_span <= self.backlash[self.dir] + 1.0:
+        # The walk back from where a search was stopped (:meth:`_walk`) begins as a start does:
+        # where it turned, the tendon it had been loading may be taut on its plateau.
+        if (self.seg_from_start or self.seg_back) and kink.after > 0 \
+                and flat_span <= self.backlash[self.dir] + 1.0:
             if (-lvl - band_wide) / kink.after > MAX_OFFSET_SE and not self._one_line_through(kink, c0):
                 return REFUSE, (f"the flat before the kink at {kink.at:.2f} deg sits at {kink.level:.1f} mA, beyond "
                                 f"the no-load band ({c0:.1f} +- {band_wide:.1f} mA) on the side of the tendon behind: "
@@ -1191,10 +1203,9 @@ class _Search:
             return
         if self.dir * (a.at - self.start) >= self.plateaus[self.dir] + 1.0:
             self.arrival = a
+            self.arrival_dir = self.dir
 
     def run(self):  # noqa: ANN201 - (kind, Kink)
-        from .current import loading_edge
-
         try:
             first = getattr(self.probe, "first_direction", None)
             read = getattr(self.probe, "read", None)
@@ -1214,102 +1225,155 @@ class _Search:
                 side = self._taut_side(float(np.median(self.seg_c[1:])))
             if side != 0:
                 self._turn_toward_slack(side)
-            while True:
-                self._step()
-                n = len(self.seg_q)
-                q, c = np.array(self.seg_q), np.array(self.seg_c)
-                # contact: the last readings climb far steeper than any tendon, away from the
-                # no-load level (backing off a wall is as steep, toward it)
-                c0 = self.th.no_load(self.dir, self.moving)[0]
-                if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
-                        (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper) and \
-                        (c0 is None or abs(c[-1] - c0) > abs(c[-3] - c0)):
-                    sig = _reading_noise(c)
-                    self.steep[self.dir] = self._steep_edge(q, c, sig if math.isfinite(sig) and sig > 0 else 1e-9)
-                    self.contacts.append(self.q)
-                    self.short = None    # a rise at the start that ends on a wall is no edge to keep
-                    both = self._steep_pair()
-                    if both is not None:
-                        self.dir = both[0]
-                        return LOAD, both[1]
-                    if len(self.contacts) > 1:
-                        raise ShiftDetectionError(
-                            f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
-                            f"{self.contacts[1]:.2f} deg): no free side to find a dead-zone edge")
-                    self._reverse()
-                    continue
-                if n < self.LOADED_CHECK:
-                    continue
-                sig = _reading_noise(c)
-                sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
-                kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
-                # a start in the dead zone that has been loading from the first reading (no kink
-                # out of a flat stretch): a tendon was taut after all
-                if (kink is None and self.seg_from_start and not self.start_outside
-                        and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower and _ls_slope(q, c) >= self.th.eps_lower):
-                    if self.th.current_dead_zone is None:
-                        raise ShiftDetectionError(
-                            f"knob {self.knob} is loaded from the first steps (a tendon is already taut at "
-                            f"{self.start:g} deg) and the model has no no-load current level to tell which "
-                            "one: give --current-dead-zone (or identify the model with `hyst identify`)")
-                    if self._taut_side(float(c[-1])) == self.dir:
-                        # loading since the first reading and now clearly off the no-load level
-                        self._turn_toward_slack(self.dir)
-                        continue
-                self._watch_arrival(q, c, sig)
-                self.ready = None
-                status, why = (None, "") if kink is None else self._judge(kink)
-                if status in (None, DOUBT, REFUSE) and (
-                        kink is not None or _ls_slope(q[-4:], c[-4:]) >= 0.5 * self.th.eps_lower):
-                    # no edge on the reading identification makes of a whole sweep's many points:
-                    # read the search's few noisy ones more strictly (as many straight pieces as
-                    # their noise pays for, the flat stretch without the unloading that led into
-                    # it). An edge found so is held in reserve for RESERVE_STEPS readings past it,
-                    # or until the search can go no further: where the first reading finds one
-                    # meanwhile, that one stands.
-                    alt = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0,
-                                       strict_flat=True, select=True, convex=True)
-                    if alt is not None and alt != kink:
-                        alt_status, alt_why = self._judge(alt)
-                        if alt_status == ACCEPT and alt.n_after < RESERVE_STEPS:
-                            alt_status = READY
-                        if alt_status not in (DOUBT, REFUSE) or kink is None:
-                            kink, status, why = alt, alt_status, alt_why
-                if status in (ACCEPT, READY):
-                    drift = self._drifted(kink)
-                    if drift is not None:
-                        status, why = REFUSE, drift
-                if status == ACCEPT:
-                    return LOAD, kink
-                if status == READY:
-                    self.ready = kink
-                if why:
-                    self.pending_refusal = why
-                if (kink is None or status == REFUSE) and self.ready is None and self._taut_without_edge(c):
-                    # the tendon ahead is taut and no edge could be read on the way to it (an
-                    # edge a step or two from the start, one the model cannot give an offset
-                    # from): the other edge lies across the dead zone, as from a taut start. (A
-                    # kink only doubtful yet is given the readings that may make it clear.)
-                    self.turned = True
-                    self._turn_toward_slack(self.dir)
+            return self._walk()
         except _LimitReached as lim:
-            if self.ready is not None:
-                # the edge passed every check on the readings there are: the search can go no
-                # further to lengthen its loaded stretch
-                return LOAD, self.ready
-            if self.short is not None:
-                # no edge with a flat long enough to read lay within reach: the one at the start,
-                # whose few flat readings sat at the no-load level, is the evidence there is
-                self.dir = self.short[0]
-                return LOAD, self.short[1]
             why = f"; the last candidate was refused: {self.pending_refusal}" if self.pending_refusal else ""
             where = (" (it met a taut tendon with no edge to read and went through the dead zone toward the "
                      "other edge)" if self.turned else
                      " (it started with a tendon taut and went through the dead zone toward the other edge)"
                      if self.start_outside else "")
+            if self.back is not None:
+                where += (f", then, stopped there ({self.back}), turned back to read the edge it had "
+                          "left from the dead zone")
             raise ShiftDetectionError(
                 f"knob {self.knob}: no edge found within {self.steps} steps / {self.travel:.1f} deg of knob "
                 f"travel ({lim.why}){where}{why}") from None
+
+    def _walk(self):  # noqa: ANN202 - (kind, Kink)
+        """Step and judge until an edge is accepted or a limit is reached (:class:`_LimitReached`)."""
+        from .current import loading_edge
+
+        while True:
+            try:
+                return self._walk_on(loading_edge)
+            except _LimitReached as lim:
+                if self.ready is not None:
+                    # the edge passed every check on the readings there are: the search can go no
+                    # further to lengthen its loaded stretch
+                    return LOAD, self.ready
+                if self.short is not None:
+                    # no edge with a flat long enough to read lay within reach: the one at the
+                    # start, whose few flat readings sat at the no-load level, is the evidence there is
+                    self.dir = self.short[0]
+                    return LOAD, self.short[1]
+                if self.back is None and self._released() and not self.contacts:
+                    # it left a taut tendon across the dead zone for the other edge, which lies
+                    # beyond reach (the travel limit, or the end of a record): the edge it left is
+                    # still there, and now it has the whole dead zone's flat before it. Turn back
+                    # once and load that tendon from the flat, as from a start in the dead zone
+                    self.back = lim.why
+                    self._reverse()
+                    self.seg_back = True
+                    continue
+                raise
+
+    def _released(self) -> bool:
+        """Whether the taut tendon the search turned from is slack by now: its current has come
+        back to the no-load level (the band :meth:`_taut_side` reads) and stays there, no longer
+        moving toward it, over the last :data:`AFTER_STEPS` readings (a degree or more).
+
+        Till then the tendon still carries load (its tip on the backlash plateau, or still
+        unloading), and a walk back takes it up again where the knob last turned, not at its
+        edge (design replay 932: still unloading 12 deg from where it turned, the kink 13 deg
+        past the edge; 76: a held load 21 deg long). Without a no-load level, never.
+        """
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        if self.left is None or c0 is None:
+            return False
+        if len(self.seg_q) < AFTER_STEPS or abs(self.seg_q[-1] - self.seg_q[-AFTER_STEPS]) < 1.0:
+            return False
+        q, c = np.array(self.seg_q[-AFTER_STEPS:]), np.array(self.seg_c[-AFTER_STEPS:])
+        if not all(self._taut_side(float(v)) == 0 for v in c):
+            return False
+        # stays: not still moving toward the no-load level, as an unloading does through a wide
+        # band (design replay 397, a wall plant: 11 mA over the last 1.5 deg, 100 mA short of the
+        # no-load level, inside the sweep's band of +-132)
+        noise = _reading_noise(np.array(self.seg_c))
+        if not math.isfinite(noise):
+            return False
+        change = _ls_slope(q, c) * (q[-1] - q[0])
+        return not (np.sign(change) == np.sign(c0 - float(np.mean(c))) and abs(change) > 3.0 * noise)
+
+    def _walk_on(self, loading_edge):  # noqa: ANN001, ANN202 - (kind, Kink)
+        """One leg of the walk: step, read the segment's kink, judge it; returns an accepted edge."""
+        while True:
+            self._step()
+            n = len(self.seg_q)
+            q, c = np.array(self.seg_q), np.array(self.seg_c)
+            # contact: the last readings climb far steeper than any tendon, away from the
+            # no-load level (backing off a wall is as steep, toward it)
+            c0 = self.th.no_load(self.dir, self.moving)[0]
+            if n >= 3 and _ls_slope(q[-3:], c[-3:]) >= self.th.eps_upper and \
+                    (n < 4 or _ls_slope(q[-4:-1], c[-4:-1]) >= self.th.eps_upper) and \
+                    (c0 is None or abs(c[-1] - c0) > abs(c[-3] - c0)):
+                sig = _reading_noise(c)
+                self.steep[self.dir] = self._steep_edge(q, c, sig if math.isfinite(sig) and sig > 0 else 1e-9)
+                self.contacts.append(self.q)
+                self.short = None    # a rise at the start that ends on a wall is no edge to keep
+                both = self._steep_pair()
+                if both is not None:
+                    self.dir = both[0]
+                    return LOAD, both[1]
+                if len(self.contacts) > 1:
+                    raise ShiftDetectionError(
+                        f"knob {self.knob}: contact in both directions (at {self.contacts[0]:.2f} and "
+                        f"{self.contacts[1]:.2f} deg): no free side to find a dead-zone edge")
+                self._reverse()
+                continue
+            if n < self.LOADED_CHECK:
+                continue
+            sig = _reading_noise(c)
+            sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
+            kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
+            # a start in the dead zone that has been loading from the first reading (no kink
+            # out of a flat stretch): a tendon was taut after all
+            if (kink is None and self.seg_from_start and not self.start_outside
+                    and _ls_slope(q[:4], c[:4]) >= self.th.eps_lower and _ls_slope(q, c) >= self.th.eps_lower):
+                if self.th.current_dead_zone is None:
+                    raise ShiftDetectionError(
+                        f"knob {self.knob} is loaded from the first steps (a tendon is already taut at "
+                        f"{self.start:g} deg) and the model has no no-load current level to tell which "
+                        "one: give --current-dead-zone (or identify the model with `hyst identify`)")
+                if self._taut_side(float(c[-1])) == self.dir:
+                    # loading since the first reading and now clearly off the no-load level
+                    self._turn_toward_slack(self.dir)
+                    continue
+            self._watch_arrival(q, c, sig)
+            self.ready = None
+            status, why = (None, "") if kink is None else self._judge(kink)
+            if status in (None, DOUBT, REFUSE) and (
+                    kink is not None or _ls_slope(q[-4:], c[-4:]) >= 0.5 * self.th.eps_lower):
+                # no edge on the reading identification makes of a whole sweep's many points:
+                # read the search's few noisy ones more strictly (as many straight pieces as
+                # their noise pays for, the flat stretch without the unloading that led into
+                # it). An edge found so is held in reserve for RESERVE_STEPS readings past it,
+                # or until the search can go no further: where the first reading finds one
+                # meanwhile, that one stands.
+                alt = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0,
+                                   strict_flat=True, select=True, convex=True)
+                if alt is not None and alt != kink:
+                    alt_status, alt_why = self._judge(alt)
+                    if alt_status == ACCEPT and alt.n_after < RESERVE_STEPS:
+                        alt_status = READY
+                    if alt_status not in (DOUBT, REFUSE) or kink is None:
+                        kink, status, why = alt, alt_status, alt_why
+            if status in (ACCEPT, READY):
+                drift = self._drifted(kink)
+                if drift is not None:
+                    status, why = REFUSE, drift
+            if status == ACCEPT:
+                return LOAD, kink
+            if status == READY:
+                self.ready = kink
+            if why:
+                self.pending_refusal = why
+            if (kink is None or status == REFUSE) and self.ready is None and self._taut_without_edge(c):
+                # the tendon ahead is taut and no edge could be read on the way to it (an
+                # edge a step or two from the start, one the model cannot give an offset
+                # from): the other edge lies across the dead zone, as from a taut start. (A
+                # kink only doubtful yet is given the readings that may make it clear.)
+                self.turned = True
+                self._turn_toward_slack(self.dir)
 
 
 # --------------------------------------------------------------------------------------------
@@ -1463,7 +1527,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
             edge = "pos" if d > 0 else "neg"
             offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
             a = search.arrival
-            ref = arrive.get(d)
+            ref = arrive.get(search.arrival_dir)
             if a is not None and ref is not None and abs((a.at - ref) - offset) > ARRIVAL_AGREE:
                 raise ShiftDetectionError(
                     f"knob {k}: the readings disagree: where the unloading tendon's current met the dead zone "

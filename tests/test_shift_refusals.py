@@ -234,13 +234,37 @@ def test_a_dead_zone_below_the_sweeps_no_load_level_is_read_by_how_far_the_curre
 
 def test_an_unloading_tendon_that_stops_at_the_no_load_level_is_still_no_edge():
     # the mirror case: the negative tendon's plateau 25 mA below, then its unloading up to the
-    # no-load level, flat there: no edge (the positive one at 30 is beyond the travel limit)
+    # no-load level, flat there: no edge (the positive one at 30 is beyond the travel limit).
+    # Moving down from the dead zone the tendon is taken up at its edge, q = 2 (where the
+    # plateau ended: a tip-load current, slack from q = 7)
     def law(q, d):
+        if d < 0:
+            return 114.0 - 5.0 * max(2.0 - q, 0.0)
         unload = -25.0 + 5.0 * min(max(q - 2.0, 0.0), 5.0)     # plateau to q=2, slack at q=7
         return 126.0 + unload + 4.0 * max(q - 30.0, 0.0)
 
+    # the search walked 20 deg away, past the model's 3 deg backlash of that tendon: it turns
+    # back at the travel limit and reads the edge from the dead zone, never where the unloading
+    # met the no-load level
+    probe = Knob(law, seed=7)
+    r = detect_shift(model(), probe, 1, max_travel=20.0)
+    assert r.edge == "neg" and r.edge_found_at == pytest.approx(2.0, abs=0.2)
+    assert r.offset == pytest.approx(2.0 - STRAIGHT.d_neg, abs=0.2)
+    assert max(probe.moves) <= 20.0 + 1e-9
+
+    # the same tendon unloading slowly, slack only at q = 15, past the travel limit of 12: where
+    # the search stops its current still climbs toward the no-load level (inside the band the
+    # start is read by), the tendon still loaded. A walk back would take it up again where the
+    # knob turned, not at its edge: refused
+    def slow(q, d):
+        if d < 0:
+            return 114.0 - 5.0 * max(2.0 - q, 0.0)
+        return 126.0 - 25.0 + 25.0 / 13.0 * min(max(q - 2.0, 0.0), 13.0)
+
     with pytest.raises(ShiftDetectionError, match="no edge found"):
-        detect_shift(model(), Knob(law, seed=7), 1, max_travel=20.0)
+        detect_shift(model(), Knob(slow, seed=7), 1, max_travel=12.0)
+    r = detect_shift(model(), Knob(slow, seed=7), 1, max_travel=20.0)    # slack by then: it turns back
+    assert r.edge_found_at == pytest.approx(2.0, abs=0.2)
 
 
 # --------------------------------------------------------------------------------------------

@@ -166,3 +166,28 @@ def test_a_taut_tendon_meeting_a_wall_is_no_edge():
     case, detect = _detect(2300098)
     with pytest.raises(ShiftDetectionError, match="a taut tendon meeting a wall"):
         detect()
+
+
+@pytest.mark.parametrize("seed", [36, 1281, 1802])
+def test_a_search_stopped_across_the_dead_zone_walks_back_to_the_edge_it_left(seed):
+    # design replays that start with a tendon taut: the search heads through the dead zone for
+    # the other edge, which lies past where the record goes (1281: the record turns at -10.06
+    # deg, the negative edge at -22.12). Stop 23's code refused them there; the tendon it left
+    # is slack by then (its current back at the no-load level), so the search turns back once
+    # and reads that tendon's edge from the dead zone's flat (1281: 0.65 deg, a flat of 10 deg
+    # before it, the knob at 0.27 deg at the start)
+    r = _right_or_refused(seed)
+    assert r is not None and r.start_outside
+    assert r.edge == ("pos" if seed == 1281 else "neg")
+
+
+@pytest.mark.parametrize("seed", [76, 932])
+def test_a_walk_back_to_a_tendon_still_loaded_is_refused(seed):
+    # the tendon the search left had not gone slack where the record ends: 932 (a tip-load
+    # current 21.5 deg past its edge at the start) was still unloading at 35 mA/deg there, and
+    # 76 held its load over all 21 deg the knob went. Walking back takes such a tendon up where
+    # the knob last turned, not at its edge: without the check the walk back returned
+    # -14.24 deg against a true shift of -26.86 (932) and 11.17 against 14.90 (76)
+    case, detect = _detect(seed)
+    with pytest.raises(ShiftDetectionError, match="no edge found"):
+        detect()
