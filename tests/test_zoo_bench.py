@@ -63,3 +63,26 @@ def test_edge_placeable_on_a_zoo_replay():
     assert 0.0 < bound <= zoo.PLACEABLE_SE
     # a travel limit of one step reads no loaded stretch past an edge away from the start
     assert math.isinf(zoo.edge_placeable_se(case, rep, 0.5))
+
+
+def _replay_q(seed: int):
+    case = plants.replay_case(seed)
+    return case, np.asarray(parse_run(case.replay.csv_text(), source=f"replay-{seed}")["q1"], float)
+
+
+@pytest.mark.parametrize("seed, travel, expected", [
+    # design replay 0: the positive tendon taut at the start (edge -11.16, the knob at 0); the
+    # record goes down to -57.4, past where that tendon is slack on any law (-11.16 - 4.70 - 2.5),
+    # and back up past -11.16 + 3: a walk back can read it, within a travel of 40 deg, not of 5
+    (0, 40.0, True), (0, 5.0, False),
+    # 76: the negative tendon taut (edge 5.01, backlash 23.16): slack only from 30.7 deg on, and
+    # the record turns at 21.6
+    (76, 40.0, False),
+    # 932: the positive tendon taut (edge -21.23, backlash 8.59); the record never goes below -11.6
+    (932, 40.0, False),
+    # 1281: a slack start (the positive edge at 0.65 lies ahead of the knob at 0): no walk back
+    (1281, 40.0, False),
+])
+def test_a_walk_back_is_counted_only_where_the_replay_lets_the_tendon_go_slack_and_return(seed, travel, expected):
+    case, q = _replay_q(seed)
+    assert zoo.walk_back_reachable(case, q, travel) is expected
