@@ -975,7 +975,8 @@ class _Search:
         flat_span = self.dir * (kink.at - self.seg_q[0])
         behind = 0.0
         # The walk back from where a search was stopped (:meth:`_walk`) begins as a start does:
-        # where it turned, the tendon it had been loading may be taut on its plateau.
+        # the tendon behind it, the far one, which the walk out may have loaded without reading
+        # its edge, may still be taut on its plateau.
         if (self.seg_from_start or self.seg_back) and kink.after > 0 \
                 and flat_span <= self.backlash[self.dir] + 1.0:
             if (-lvl - band_wide) / kink.after > MAX_OFFSET_SE and not self._one_line_through(kink, c0):
