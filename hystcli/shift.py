@@ -559,6 +559,9 @@ class ShiftResult:
         met with no edge to read before it (an edge a step or two from the start).
     returned : bool
         The knob was returned to ``start`` after the search.
+    walked_back : bool
+        The far edge lay beyond reach, and the offset came from the edge of the tendon the search
+        had left, read on the walk back to it from the dead zone.
     eps_lower, eps_upper, step : float
         The thresholds (mA/deg) and unit step (deg) used.
     evidence : Evidence or None
@@ -582,6 +585,7 @@ class ShiftResult:
     contacts: tuple[float, ...] = ()
     start_outside: bool = False
     returned: bool = True
+    walked_back: bool = False
     eps_lower: float = math.nan
     eps_upper: float = math.nan
     step: float = math.nan
@@ -595,7 +599,7 @@ class ShiftResult:
             "edge": self.edge, "edge_found_at": self.edge_found_at, "direction": self.direction,
             "transition": self.transition, "start": self.start, "travel": self.travel,
             "steps": self.steps, "contacts": list(self.contacts),
-            "start_outside": self.start_outside, "returned": self.returned,
+            "start_outside": self.start_outside, "returned": self.returned, "walked_back": self.walked_back,
             "eps_lower": self.eps_lower, "eps_upper": self.eps_upper, "step": self.step,
             "evidence": None if self.evidence is None else self.evidence.to_dict(),
         }
@@ -1577,6 +1581,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         edge=edge, edge_found_at=float(kink.at), direction=int(d), transition=transition,
         start=start, travel=float(search.travel), steps=int(search.steps),
         contacts=tuple(float(c) for c in search.contacts), start_outside=search.start_outside,
+        walked_back=search.back is not None,
         returned=returned, eps_lower=th.eps_lower, eps_upper=th.eps_upper, step=float(step),
         evidence=ev, trace=tuple(search.trace))
 

@@ -248,7 +248,7 @@ def test_an_unloading_tendon_that_stops_at_the_no_load_level_is_still_no_edge():
     # met the no-load level
     probe = Knob(law, seed=7)
     r = detect_shift(model(), probe, 1, max_travel=20.0)
-    assert r.edge == "neg" and r.edge_found_at == pytest.approx(2.0, abs=0.2)
+    assert r.edge == "neg" and r.edge_found_at == pytest.approx(2.0, abs=0.2) and r.walked_back
     assert r.offset == pytest.approx(2.0 - STRAIGHT.d_neg, abs=0.2)
     assert max(probe.moves) <= 20.0 + 1e-9
 

@@ -177,7 +177,7 @@ def test_a_search_stopped_across_the_dead_zone_walks_back_to_the_edge_it_left(se
     # and reads that tendon's edge from the dead zone's flat (1281: 0.65 deg, a flat of 10 deg
     # before it, the knob at 0.27 deg at the start)
     r = _right_or_refused(seed)
-    assert r is not None and r.start_outside
+    assert r is not None and r.start_outside and r.walked_back
     assert r.edge == ("pos" if seed == 1281 else "neg")
 
 

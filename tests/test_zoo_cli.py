@@ -74,5 +74,24 @@ def test_detect_shift_on_independent_replays(tmp_path):
         offset = load_model(out).knob(1).offset
         assert abs(offset - case.offset) <= 0.5, (seed, case.family, offset, case.offset)
         ok += 1
-    # measured: 8 of 16 offsets (the others: a far edge beyond the travel limit, or weak evidence)
-    assert ok >= 6
+    # measured: 12 of 16 offsets (stop 23's code, before the walk back: 10; the others: no edge
+    # within reach, or weak evidence)
+    assert ok >= 11
+
+
+def test_detect_shift_says_when_its_offset_came_from_a_walk_back(tmp_path):
+    # design replay 1802: the negative tendon taut at the start, the positive edge out of the
+    # record's reach; the offset comes from the negative edge, read on the walk back
+    case = plants.replay_case(1802)
+    model, _ = straight_model(case)
+    mp, rep = tmp_path / "model.json", tmp_path / "replay.csv"
+    save_model(mp, model)
+    rep.write_text(case.replay.csv_text())
+    res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(rep), "-o", str(tmp_path / "a.json")])
+    assert res.exit_code == 0, res.output
+    assert "crossed the dead zone, the far edge out of reach: walked back to the edge it left" in res.stdout
+    res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(rep), "-o", str(tmp_path / "b.json"),
+                              "--format", "json", "-q"])
+    got = json.loads(res.stdout)["knobs"]["1"]
+    assert got["walked_back"] is True and got["start_outside"] is True and got["edge"] == "neg"
+    assert abs(got["offset"] - case.offset) <= 0.5

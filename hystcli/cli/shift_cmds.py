@@ -61,7 +61,8 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
     for k, r in results.items():
         notes = []
         if r.start_outside:
-            notes.append("started with a tendon taut: crossed the dead zone")
+            notes.append("started with a tendon taut: crossed the dead zone"
+                         + (", the far edge out of reach: walked back to the edge it left" if r.walked_back else ""))
         if r.contacts:
             notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
