@@ -659,7 +659,6 @@ class _Search:
         self.start_outside = False
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
         self.back: str | None = None  # why it turned back to the taut edge it had left (see _walk)
-        self.left: tuple[int, float] | None = None   # (side, knob angle) of the last taut tendon it turned from
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
@@ -729,7 +728,6 @@ class _Search:
     def _turn_toward_slack(self, side: int) -> None:
         """A tendon is taut: head for the dead zone and through it to the other edge."""
         self.start_outside = True
-        self.left = (side, self.q)
         if self.dir == side:
             self._reverse()
 
@@ -1246,11 +1244,9 @@ class _Search:
 
     def _walk(self):  # noqa: ANN202 - (kind, Kink)
         """Step and judge until an edge is accepted or a limit is reached (:class:`_LimitReached`)."""
-        from .current import loading_edge
-
         while True:
             try:
-                return self._walk_on(loading_edge)
+                return self._walk_on()
             except _LimitReached as lim:
                 if self.ready is not None:
                     # the edge passed every check on the readings there are: the search can go no
@@ -1283,7 +1279,7 @@ class _Search:
         past the edge; 76: a held load 21 deg long). Without a no-load level, never.
         """
         c0 = self.th.no_load(self.dir, self.moving)[0]
-        if self.left is None or c0 is None:
+        if not self.start_outside or c0 is None:
             return False
         if len(self.seg_q) < AFTER_STEPS or abs(self.seg_q[-1] - self.seg_q[-AFTER_STEPS]) < 1.0:
             return False
@@ -1299,8 +1295,10 @@ class _Search:
         change = _ls_slope(q, c) * (q[-1] - q[0])
         return not (np.sign(change) == np.sign(c0 - float(np.mean(c))) and abs(change) > 3.0 * noise)
 
-    def _walk_on(self, loading_edge):  # noqa: ANN001, ANN202 - (kind, Kink)
+    def _walk_on(self):  # noqa: ANN202 - (kind, Kink)
         """One leg of the walk: step, read the segment's kink, judge it; returns an accepted edge."""
+        from .current import loading_edge
+
         while True:
             self._step()
             n = len(self.seg_q)
