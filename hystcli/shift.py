@@ -454,6 +454,7 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
     """
     ident = model.identification.get(int(knob))
     given_level = current_dead_zone is not None
+    given_slopes = eps_lower is not None or eps_upper is not None
     if eps_lower is None and ident is not None:
         eps_lower = ident.eps_lower
     if eps_upper is None and ident is not None:
@@ -468,6 +469,15 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
     for name, v in (("eps_lower", eps_lower), ("eps_upper", eps_upper)):
         if not (math.isfinite(v) and v > 0):
             raise ShiftDetectionError(f"{name} must be a positive number, got {v}")
+    if not eps_upper > eps_lower and not given_slopes:
+        # both from the identification: its sweep's current did not climb more steeply past the
+        # edges than in the dead zone (a motor current that is its Coulomb rectangle, as on the
+        # real da Vinci logs), so the current shows no tendon taken up to search for
+        raise ShiftDetectionError(
+            f"the identification of knob {knob} found the current no steeper past the edges than in the "
+            f"dead zone (loaded slope {ident.slope_loaded:.3g} mA/deg, dead zone {ident.slope_dead_zone:.3g}): "
+            "this motor current shows no tendon taken up, so Algorithm 1 has no edge to find; give "
+            "--eps-lower and --eps-upper to search anyway")
     if not eps_upper > eps_lower:
         raise ShiftDetectionError(f"eps_upper must be greater than eps_lower "
                                   f"(got eps_lower = {eps_lower:g}, eps_upper = {eps_upper:g})")

@@ -340,6 +340,13 @@ def test_thresholds_come_from_the_model_or_the_options():
         resolve_thresholds(bare, 1, eps_lower=1.0)
     with pytest.raises(ShiftDetectionError, match="greater than eps_lower"):
         resolve_thresholds(bare, 1, eps_lower=3.0, eps_upper=2.0)
+    # a sweep whose current was no steeper past the edges than in the dead zone (real pitch_3:
+    # 4.85 in the dead zone, 0.06 loaded): the defaults are 4.85 and 0.30, and the reason is the
+    # current, not an option the user gave
+    flat = Model({1: STRAIGHT}, identification={1: KnobIdentification(4.85, 0.06, -40.0, 40.0)})
+    with pytest.raises(ShiftDetectionError, match="shows no tendon taken up"):
+        resolve_thresholds(flat, 1)
+    assert resolve_thresholds(flat, 1, eps_lower=1.0, eps_upper=20.0).eps_upper == 20.0
     r = detect_shift(bare, LawProbe(-6.0, 8.0), 1, eps_lower=1.5, eps_upper=20.0)
     assert r.offset == pytest.approx(-1.0, abs=0.1)
 
