@@ -397,7 +397,7 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
 
 def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
                  resolution: float | None = None, strict_flat: bool = False,
-                 select: bool = False, convex: bool = False) -> Kink | None:
+                 select: bool = False, convex: bool = False, min_run: int = 0) -> Kink | None:
     """Where a tendon is taken up on one monotone stretch, or None when it shows no such kink.
 
     ``q, c`` are points along the motion (binned samples, or a stepping search's readings);
@@ -412,7 +412,8 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     slope may be any share of the loaded one (or twice a pretensioned dead zone's). With
     ``select``, the stretch is split into only as many pieces as the noise ``sig`` lets pay for
     themselves (:func:`pieces`). With ``convex``, the loaded side may stiffen but not sag
-    (:func:`kink_fit`).
+    (:func:`kink_fit`). With ``min_run``, a steeper piece ends the loaded run (a wall) only after
+    that many points of it: the fewest a caller needs past a kink to judge it.
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -455,6 +456,14 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     a0 = pcs[first][0]
     stop = x.size
     for jj in range(j + 2, len(pcs)):
+        if pcs[jj][0] - pcs[j + 1][0] < min_run:
+            # a run that short between the flat and a steeper piece is the corner, its readings
+            # straddling the edge (one just past it, barely loaded): the steeper piece is the
+            # tendon's own loaded one, not a wall, and a fit stopped before it would wait for
+            # points past the kink that can never come (design replays 1531, a stretch law read
+            # 0.1 deg past its edge, and 1898: refused at the travel limit with the edge 20 and
+            # 5 deg behind)
+            continue
         if slopes[jj - 1] <= JUMP_RATIO * slopes[jj] and (slopes[jj] - slopes[jj - 1]) * (
                 x[pcs[jj][1] - 1] - x[pcs[jj][0]]) > 6 * sig:
             stop = pcs[jj][0]

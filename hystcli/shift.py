@@ -1337,7 +1337,8 @@ class _Search:
                 continue
             sig = _reading_noise(c)
             sig = sig if math.isfinite(sig) and sig > 0 else 1e-9
-            kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True)
+            kink = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0, convex=True,
+                                min_run=AFTER_STEPS)
             # a start in the dead zone that has been loading from the first reading (no kink
             # out of a flat stretch): a tendon was taut after all
             if (kink is None and self.seg_from_start and not self.start_outside
@@ -1363,7 +1364,7 @@ class _Search:
                 # or until the search can go no further: where the first reading finds one
                 # meanwhile, that one stands.
                 alt = loading_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0,
-                                   strict_flat=True, select=True, convex=True)
+                                   strict_flat=True, select=True, convex=True, min_run=AFTER_STEPS)
                 if alt is not None and alt != kink:
                     alt_status, alt_why = self._judge(alt)
                     if alt_status == ACCEPT and alt.n_after < RESERVE_STEPS:

@@ -14,7 +14,7 @@ import pytest
 from hystcli.current import kink_fit, loading_edge, pieces
 from hystcli.errors import ShiftDetectionError
 from hystcli.model import KnobIdentification, KnobModel, Model
-from hystcli.shift import ProbeSample, detect_shift
+from hystcli.shift import AFTER_STEPS, ProbeSample, detect_shift
 
 # the straight model: dead zone [-5, 9] (14 deg wide)
 STRAIGHT = KnobModel(d_pos=9.0, d_neg=-5.0, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
@@ -139,6 +139,28 @@ def test_the_flat_stretch_of_a_kink_fit_leaves_out_the_unloading_that_led_into_i
         assert kink is not None and kink.n_before <= n_flat
         assert kink.at == pytest.approx(14.0, abs=0.05) and abs(kink.before) < 0.3
         assert kink.residual < 2 * 0.2
+
+
+def test_a_corner_between_two_readings_does_not_stop_the_kink_fit_before_the_loaded_run():
+    # a stretch current stepped every 0.5 deg: flat at 180 mA, 6.9 mA/deg past q = 7.4, so the
+    # reading at 7.5 is barely loaded. In some draws the readings at 7.0-8.0 make a piece of their
+    # own, steeper than the flat and gentler than the loaded run, which the sweep's reading then
+    # took for a wall after a loaded run: the kink fit stopped there, two points past the kink,
+    # and a search that needs four waited at that kink to the travel limit (design replays 1531
+    # and 1898). With ``min_run`` (what the search passes, AFTER_STEPS) the loaded run is the
+    # steeper piece and the kink sits at the edge, every reading past it in the fit
+    q = np.arange(0.0, 14.01, 0.5)
+    past = int(np.sum(q > 7.4))                                   # 14 readings
+    stopped = placed = 0
+    for seed in range(100):
+        rng = np.random.default_rng(seed)
+        c = 180.0 + 6.9 * np.maximum(q - 7.4, 0.0) + rng.normal(0.0, 0.1, q.size)
+        loose = loading_edge(q, c, 1, 0.1, minlen=2, resolution=0.02, convex=True)
+        stopped += loose is None or loose.n_after < 4
+        k = loading_edge(q, c, 1, 0.1, minlen=2, resolution=0.02, convex=True, min_run=AFTER_STEPS)
+        placed += k is not None and abs(k.at - 7.4) <= 0.1 and k.n_after == past
+    assert placed == 100
+    assert stopped >= 4, stopped
 
 
 def test_quantised_readings_are_split_into_as_many_pieces_as_their_noise_pays_for():

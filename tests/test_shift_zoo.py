@@ -191,3 +191,14 @@ def test_a_walk_back_to_a_tendon_still_loaded_is_refused(seed):
     case, detect = _detect(seed)
     with pytest.raises(ShiftDetectionError, match="no edge found"):
         detect()
+
+
+@pytest.mark.parametrize("seed", [1531, 1750, 1898])
+def test_an_edge_read_just_after_a_reading_is_not_waited_on_to_the_travel_limit(seed):
+    # design replays whose edge falls a tenth of a degree before a reading (1531: a stretch law,
+    # the edge at -7.67, a reading at -7.76 barely loaded): the readings around it made a short
+    # piece of their own, taken for a loaded run that a wall (the true loaded run) ended, and the
+    # search waited at a kink with two readings past it until the travel limit, 5-20 deg on
+    # (stop 24's code refused all three). The loaded run is read whole now
+    r = _right_or_refused(seed)
+    assert r is not None
