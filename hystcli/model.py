@@ -516,8 +516,10 @@ class KnobIdentification:
         the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
     current_arrive_rising, current_arrive_falling : float or None
         Where, on the sweep's branches after a reversal, the unloading tendon's current arrived at
-        the dead zone (deg): rising, the negative tendon; falling, the positive one. Algorithm 1
-        compares a search that starts with a tendon taut against these.
+        the dead zone (deg): rising, the negative tendon; falling, the positive one. Kept as a
+        record of the sweep; Algorithm 1 no longer compares a search's arrival with them (where
+        an unloading current meets the dead zone depends on the current law, and on design
+        replays of the plant zoo every disagreement was the arrival's, not the loading edge's).
     unfixed : tuple of str
         Dead-zone edges the sweep could not place (``"d_pos"``, ``"d_neg"``): Algorithm 1 must
         not take an offset from them.

@@ -23,10 +23,10 @@ real current is not one law:
   that moves back toward its no-load level is a tendon unloading, never an edge: where it meets
   the dead zone depends on the current law (the knob position of the slack for a stretching
   tendon, the end of the tip's unloading for one that follows the tip's load), so it gives no
-  offset; but when the identification sweep's branches show where it lies (read the same way,
-  after a reversal well past the backlash), the offset it implies must agree with the loading
-  edge's, or the search refuses. (Used alone, it gave wrong offsets on 8 of 300 independent
-  plants: ``bench/zoo.py``.)
+  offset, and is not compared with where the sweep's branches put it either. (Used alone it gave
+  wrong offsets on 8 of 300 independent plants; as a cross-check of the loading edge, on design
+  replays 0-1999 and 2400000-2500499, it refused 20 offsets, every one of which the loading edge
+  had within 0.26 deg, and caught no wrong one: ``bench/zoo.py``.)
   A start in the dead zone whose current turns out to be loading from the first steps turns round
   the same way. Where the far edge lies beyond reach (the travel limit, or where a record goes),
   the search turns back once and takes the tendon it left up from the dead zone's flat, provided
@@ -116,9 +116,10 @@ STEEP_AGREE = 0.5
 """Largest disagreement (deg) between the offsets of the two contacts' steep rises out of the
 dead zone for them to be taken as the two tendons' edges (:meth:`_Search._steep_pair`)."""
 
-ARRIVAL_AGREE = 2.0
-"""Largest disagreement (deg) between the offset a taut start's arrival at the dead zone gives and
-the one its loading edge gives, when a search sees both."""
+UNPLACED_AGREE = 2.0
+"""Largest disagreement (deg) between the offset the loading edge gives and the one a tendon taken
+up at an edge the identification could not place gives (against where the sweep's current put
+that edge), when a search meets both."""
 
 TAUT_BEFORE, WALL_AFTER = 1.5, 2.5
 """A kink whose readings before climb more than TAUT_BEFORE times the sweep's dead-zone slope and
@@ -673,9 +674,6 @@ class _Search:
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
         self.short = None            # (direction, kink): an edge at the start on a flat at the no-load level
-        self.arrival = None          # where an unloading tendon's current met the dead zone
-        self.arrival_dir = 0         # the way the knob moved then (the walk back reads its edge the other way)
-        self.plateaus = {1: 0.0, -1: 0.0}
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
         self.edges = {1: 0.0, -1: 0.0}      # the model's d_pos, d_neg
         self.backlash = {1: math.inf, -1: math.inf}   # the plateau of the tendon behind, by direction
@@ -1197,27 +1195,6 @@ class _Search:
             return False
         return all(self._taut_side(float(v)) == self.dir for v in c[-AFTER_STEPS:])
 
-    def _watch_arrival(self, q: np.ndarray, c: np.ndarray, sig: float) -> None:
-        """From a taut start: note where the unloading tendon's current meets the dead zone.
-
-        Kept only when the tendon had left its backlash plateau well before (the travel from the
-        start exceeds the model's backlash on that side by a degree), so the arrival is where the
-        identification sweep's branches put it, and only once the current has sat in the no-load
-        band for four readings and 1.5 deg past it.
-        """
-        from .current import arrival_edge
-
-        if not self.start_outside or self.arrival is not None or q.size < 8:
-            return
-        if any(self._taut_side(float(v)) != 0 for v in c[-4:]):
-            return
-        a = arrival_edge(q, c, self.dir, sig, minlen=2, resolution=self.u / 25.0)
-        if a is None or a.n_after < AFTER_STEPS or self.dir * (q[-1] - a.at) < 1.5:
-            return
-        if self.dir * (a.at - self.start) >= self.plateaus[self.dir] + 1.0:
-            self.arrival = a
-            self.arrival_dir = self.dir
-
     def run(self):  # noqa: ANN201 - (kind, Kink)
         try:
             first = getattr(self.probe, "first_direction", None)
@@ -1352,7 +1329,6 @@ class _Search:
                     # loading since the first reading and now clearly off the no-load level
                     self._turn_toward_slack(self.dir)
                     continue
-            self._watch_arrival(q, c, sig)
             self.ready = None
             status, why = (None, "") if kink is None else self._judge(kink)
             if status in (None, DOUBT, REFUSE) and (
@@ -1511,28 +1487,11 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
 
     search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(direction), margin,
                      progress)
-    # from a bottom reversal (moving up) the tip holds for b_neg, from a top one for b_pos
-    search.plateaus = {1: km.b_neg, -1: km.b_pos}
     search.edges = {1: km.d_pos, -1: km.d_neg}
     search.backlash = {1: km.b_neg, -1: km.b_pos}
     ident = model.identification.get(k)
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
-    arrive = {1: None if ident is None else ident.current_arrive_rising,
-              -1: None if ident is None else ident.current_arrive_falling}
-    # A tendon's current meets the no-load level where that tendon goes slack, never while it
-    # is still taut. Moving up it is the negative tendon: taut below its edge d_neg, and the tip
-    # (the model's loop) back in the dead zone only from dhat_pos on; moving down the positive
-    # one (d_pos, dhat_neg). A sweep's arrival degrees (ARRIVAL_AGREE) on the taut side of both
-    # met the no-load level while the tendon was taut and the tip still bent: something other
-    # than the tendon carried the load (a wall holding the tip), and that reference says
-    # nothing about where the tendon goes slack: no arrival is compared with it (as for a
-    # model without one).
-    slack_from = {1: min(km.d_neg, km.dhat_pos), -1: max(km.d_pos, km.dhat_neg)}
-    arrive = {d: (v if v is not None and d * (v - slack_from[d]) >= -ARRIVAL_AGREE else None)
-              for d, v in arrive.items()}
-    if all(v is None for v in arrive.values()):
-        search.plateaus = {1: math.inf, -1: math.inf}   # no reference: never keep an arrival
     start = search.start
     try:
         kind, kink = search.run()
@@ -1540,13 +1499,6 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         if kind == LOAD:
             edge = "pos" if d > 0 else "neg"
             offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
-            a = search.arrival
-            ref = arrive.get(search.arrival_dir)
-            if a is not None and ref is not None and abs((a.at - ref) - offset) > ARRIVAL_AGREE:
-                raise ShiftDetectionError(
-                    f"knob {k}: the readings disagree: where the unloading tendon's current met the dead zone "
-                    f"({a.at:.2f} deg) gives an offset of {a.at - ref:+.2f} deg, the loading edge at "
-                    f"{kink.at:.2f} deg one of {offset:+.2f} deg")
             # An edge the identification could not place on the tip still has where the sweep's
             # current showed it taken up (read the way the search reads it). A shift moves both
             # edges by one offset: a search that met that edge too must find it moved by the
@@ -1555,7 +1507,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
             other = search.unplaced.get(-d)
             ref_other = None if ident is None else (ident.current_edge_neg if d > 0 else ident.current_edge_pos)
             if other is not None and ref_other is not None and \
-                    abs((other.at - ref_other) - offset) > ARRIVAL_AGREE:
+                    abs((other.at - ref_other) - offset) > UNPLACED_AGREE:
                 raise ShiftDetectionError(
                     f"knob {k}: the readings disagree: the tendon taken up at {other.at:.2f} deg (where the sweep's "
                     f"current put its edge at {ref_other:.2f} deg, an edge the identification could not place) gives "

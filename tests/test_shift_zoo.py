@@ -202,3 +202,13 @@ def test_an_edge_read_just_after_a_reading_is_not_waited_on_to_the_travel_limit(
     # (stop 24's code refused all three). The loaded run is read whole now
     r = _right_or_refused(seed)
     assert r is not None
+
+
+@pytest.mark.parametrize("seed", [563, 1525, 1584])
+def test_a_loading_edge_is_not_vetoed_by_where_an_unloading_current_met_the_dead_zone(seed):
+    # taut starts whose unloading tendon's current met the dead zone where the sweep's branches
+    # did not put it (1525, a tip-load law: at 4.42 deg, an offset of +6.33 against the true
+    # +2.41): where an unloading current arrives depends on the current law. Stop 24's code
+    # refused on the disagreement ("the readings disagree"); the loading edge gave +2.39
+    r = _right_or_refused(seed)
+    assert r is not None
