@@ -89,6 +89,124 @@ def robust_noise(c: np.ndarray) -> float:
     return float(1.4826 * np.median(np.abs(d - np.median(d))) / math.sqrt(2.0))
 
 
+RIPPLE_EXPLAINED = 0.5
+"""Share of the dead-zone current's variance (about its levels and slope) a cogging ripple must
+explain before it is taken for one: less, and the wave is more likely the flat's other structure
+(a pretensioned curve, a backlash load) than the motor's cogging."""
+
+RIPPLE_PERIODS = 1.5
+"""Fewest periods of a ripple the dead-zone samples must span."""
+
+RIPPLE_SHORTEST = 1.0
+"""Shortest ripple period searched (deg of knob): twice a search's default step. A shorter wave
+is averaged within one step of a replay's reading, and on a dense sweep the shortest periods of
+the grid fit the samples' own jitter (design sweeps of bench/zoo.py: 0.03 deg "periods" on
+stretch and spiky plants)."""
+
+
+@dataclass(frozen=True)
+class Ripple:
+    """A cogging ripple: the motor's torque ripple, periodic in its shaft angle and so in the knob's.
+
+    ``ripple(q) = sin * sin(2 pi q / period) + cos * cos(2 pi q / period)`` (mA): the same
+    whichever way the knob turns and whatever the tendons carry, so it can be taken out of any
+    reading of the knob at ``q``.
+
+    Attributes
+    ----------
+    period : float
+        Period in knob angle (deg).
+    sin, cos : float
+        Amplitudes of the two phases (mA).
+    """
+
+    period: float
+    sin: float
+    cos: float
+
+    @property
+    def amplitude(self) -> float:
+        """Half the peak-to-peak ripple (mA)."""
+        return math.hypot(self.sin, self.cos)
+
+    def __call__(self, q):  # noqa: ANN001, ANN204 - float or array in, the same out
+        w = 2.0 * math.pi * np.asarray(q, float) / self.period
+        out = self.sin * np.sin(w) + self.cos * np.cos(w)
+        return float(out) if np.ndim(out) == 0 else out
+
+
+def _ripple_rss(q: np.ndarray, c: np.ndarray, base: np.ndarray, period: float | None):
+    """Least squares of ``c`` on ``base`` (and the two phases of ``period``): (rss, coefficients)."""
+    a = base
+    if period is not None:
+        w = 2.0 * math.pi * q / period
+        a = np.column_stack([base, np.sin(w), np.cos(w)])
+    coef, *_ = np.linalg.lstsq(a, c, rcond=None)
+    r = c - a @ coef
+    return float(r @ r), coef
+
+
+def cogging_ripple(q: np.ndarray, c: np.ndarray, group: np.ndarray, *, max_points: int = 4000,
+                   n_periods: int = 400) -> Ripple | None:
+    """The cogging ripple of a motor current read where no tendon is taut, or None.
+
+    ``q, c`` are samples on the dead zone's flat; ``group`` labels each with the direction of
+    motion (0/1), which sets the motor's Coulomb level. The fit is a level per group, one slope
+    (a pretensioned dead zone) and a sinusoid in ``q``, its period searched on a log grid from
+    :data:`RIPPLE_SHORTEST` (or four samples' spacing) to the span over :data:`RIPPLE_PERIODS`. The ripple is taken
+    only when it explains :data:`RIPPLE_EXPLAINED` of the variance about the levels and slope,
+    and when each direction, fitted alone at that period, shows it with the same phase (within
+    45 deg) and amplitude (within a factor of 2): cogging is set by where the motor shaft is, not
+    by which way it turns, where a wave from the tendons' loads would not hold still like that.
+    """
+    q = np.asarray(q, float)
+    c = np.asarray(c, float)
+    g = np.asarray(group, int)
+    if q.size > max_points:
+        keep = np.linspace(0, q.size - 1, max_points).round().astype(int)
+        q, c, g = q[keep], c[keep], g[keep]
+    labels = [v for v in (0, 1) if np.sum(g == v) >= 20]
+    if len(labels) < 2 or q.size < 60:
+        return None
+    span = float(np.ptp(q))
+    dx = np.diff(np.sort(q))
+    dx = dx[dx > 0]
+    if dx.size == 0 or span <= 0:
+        return None
+    lo, hi = max(4.0 * float(np.median(dx)), RIPPLE_SHORTEST), span / RIPPLE_PERIODS
+    if not hi > lo:
+        return None
+    base = np.column_stack([(g == v).astype(float) for v in labels] + [q - float(q.mean())])
+    rss0, _ = _ripple_rss(q, c, base, None)
+    if not rss0 > 0:
+        return None
+    grid = np.geomspace(lo, hi, n_periods)
+    rss = np.array([_ripple_rss(q, c, base, p)[0] for p in grid])
+    i = int(np.argmin(rss))
+    if i in (0, grid.size - 1):
+        return None          # the best period at the grid's end: no ripple inside it
+    # a finer look between the neighbours
+    fine = np.geomspace(grid[i - 1], grid[i + 1], 41)
+    fr = np.array([_ripple_rss(q, c, base, p)[0] for p in fine])
+    period = float(fine[int(np.argmin(fr))])
+    rss1, coef = _ripple_rss(q, c, base, period)
+    if (rss0 - rss1) / rss0 < RIPPLE_EXPLAINED:
+        return None
+    a_sin, a_cos = float(coef[-2]), float(coef[-1])
+    amp = math.hypot(a_sin, a_cos)
+    for v in labels:
+        m = g == v
+        _, cv = _ripple_rss(q[m], c[m], np.column_stack([np.ones(int(m.sum())), q[m] - float(q[m].mean())]), period)
+        s_v, c_v = float(cv[-2]), float(cv[-1])
+        amp_v = math.hypot(s_v, c_v)
+        if not (0.5 * amp <= amp_v <= 2.0 * amp):
+            return None
+        cosang = (s_v * a_sin + c_v * a_cos) / max(amp_v * amp, 1e-300)
+        if cosang < math.cos(math.radians(45.0)):
+            return None
+    return Ripple(period, a_sin, a_cos)
+
+
 @dataclass(frozen=True)
 class Kink:
     """A kink in current against knob angle, read along the motion.

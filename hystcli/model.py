@@ -523,6 +523,11 @@ class KnobIdentification:
     unfixed : tuple of str
         Dead-zone edges the sweep could not place (``"d_pos"``, ``"d_neg"``): Algorithm 1 must
         not take an offset from them.
+    cogging_period, cogging_sin, cogging_cos : float or None
+        The motor's cogging ripple read on the sweep's dead zone
+        (:func:`hystcli.current.cogging_ripple`): period (deg of knob) and the amplitudes (mA) of
+        ``sin(2 pi q / period)`` and ``cos(...)``; Algorithm 1 takes it out of every reading.
+        None where the sweep showed none.
     """
 
     slope_dead_zone: float
@@ -540,14 +545,27 @@ class KnobIdentification:
     current_arrive_rising: float | None = None
     current_arrive_falling: float | None = None
     unfixed: tuple[str, ...] = ()
+    cogging_period: float | None = None
+    cogging_sin: float | None = None
+    cogging_cos: float | None = None
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
         object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
 
     OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
-                "current_edge_pos", "current_edge_neg", "current_arrive_rising", "current_arrive_falling")
+                "current_edge_pos", "current_edge_neg", "current_arrive_rising", "current_arrive_falling",
+                "cogging_period", "cogging_sin", "cogging_cos")
     """Fields a model file may leave out (older files have none of them but the first)."""
+
+    @property
+    def ripple(self):  # noqa: ANN201 - hystcli.current.Ripple or None
+        """The cogging ripple as a :class:`hystcli.current.Ripple`, None when the sweep showed none."""
+        if self.cogging_period is None or self.cogging_sin is None or self.cogging_cos is None:
+            return None
+        from .current import Ripple
+
+        return Ripple(self.cogging_period, self.cogging_sin, self.cogging_cos)
 
     @property
     def eps_lower(self) -> float:

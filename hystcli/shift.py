@@ -71,6 +71,10 @@ real current is not one law:
   the way (an edge a step or two from the start, or one too faint or too unsure to take) crosses
   the dead zone to the other edge, as from a taut start; so does one whose edge the model cannot
   give an offset from (unplaced, or too uncertain).
+* **the motor's cogging.** Where the identification sweep's dead zone showed a cogging ripple
+  (periodic in the knob angle, the same either way it turns:
+  :func:`hystcli.current.cogging_ripple`), every reading has it taken out before it is judged: a
+  ripple of a few mA bends a loaded line of a few mA/deg into false kinks.
 * it never exceeds its step and travel limits and, on any failure or interruption, stops the
   probe and returns the knob to where it began.
 """
@@ -373,6 +377,9 @@ class Thresholds:
     half_width : float
         Half the straight model's dead-zone width (deg): how far from the dead zone's middle its
         edges lie, which a shift does not change.
+    ripple : hystcli.current.Ripple or None
+        The motor's cogging ripple the identification read (periodic in the knob angle), taken
+        out of every reading before it is judged.
     """
 
     eps_lower: float
@@ -384,6 +391,7 @@ class Thresholds:
     noise: float = 0.0
     unfixed: tuple[str, ...] = ()
     half_width: float = 0.0
+    ripple: Any = None
 
     @property
     def slope_loaded(self) -> float:
@@ -490,7 +498,7 @@ def resolve_thresholds(model: Model, knob: int, eps_lower: float | None = None,
         if not given_level:
             extra.update(no_load_rising=ident.no_load_rising, no_load_falling=ident.no_load_falling)
         extra.update(dead_zone_swing=abs(ident.slope_dead_zone) * 0.5 * max(km.d_pos - km.d_neg, 0.0),
-                     noise=float(ident.current_noise or 0.0), unfixed=tuple(ident.unfixed))
+                     noise=float(ident.current_noise or 0.0), unfixed=tuple(ident.unfixed), ripple=ident.ripple)
     return Thresholds(float(eps_lower), float(eps_upper),
                       None if current_dead_zone is None else float(current_dead_zone), **extra)
 
@@ -702,6 +710,7 @@ class _Search:
         if not (math.isfinite(qs) and math.isfinite(cs)):
             raise ShiftDetectionError(f"knob {self.knob}: the probe reported a non-finite reading "
                                       f"(q = {s.q!r}, current = {s.current!r}) at {target:.2f} deg")
+        cs = self._uncogged(qs, cs)
         self.seg_q.append(qs)
         self.seg_c.append(cs)
         w = math.nan
@@ -710,6 +719,14 @@ class _Search:
         self.trace.append((qs, cs, w))
         if self.progress is not None:
             self.progress(s, w)
+
+    def _uncogged(self, q: float, current: float) -> float:
+        """A reading with the motor's cogging ripple at ``q`` taken out (as is without one, or
+        with one shorter than two steps, which a reading over a step averages away)."""
+        r = self.th.ripple
+        if r is None or r.period < 2.0 * self.u:
+            return current
+        return current - float(r(q))
 
     def _reverse(self) -> None:
         # a new segment: the motor's Coulomb friction jumps at a reversal, and no fit may span it
@@ -1208,7 +1225,8 @@ class _Search:
                 side = self._taut_side(float(np.median(self.seg_c[1:])))
             elif read is not None:
                 # a robot at rest: its reading before any step
-                side = self._taut_side(float(read().current))
+                first_read = read()
+                side = self._taut_side(self._uncogged(float(first_read.q), float(first_read.current)))
             else:
                 for _ in range(self.FIRST):
                     self._step()

@@ -273,3 +273,17 @@ def test_values_beyond_the_plausible_are_refused_on_read_and_on_write(tmp_path):
     assert parse_run("t,serial\n0,1e300\n")["serial"][0] == 1e300
     with pytest.raises(DataError, match="refusing to write column 'c1', sample 0"):
         format_run(Run({"t": [0.0], "c1": [2e10]}))
+
+
+def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
+    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, cogging_period=4.7,
+                               cogging_sin=1.9, cogging_cos=-0.6)
+    m = Model({1: KnobModel(9.1, -8.7, 6.2, 5.9, 1.45, -4.0, 4.2)}, identification={1: ident})
+    p = tmp_path / "m.json"
+    save_model(p, m)
+    back = load_model(p).identification[1]
+    assert (back.cogging_period, back.cogging_sin, back.cogging_cos) == (4.7, 1.9, -0.6)
+    assert back.ripple(4.7 / 4) == pytest.approx(1.9)
+    # a model without one writes no cogging keys (older files read the same)
+    save_model(p, sample_model())
+    assert "cogging" not in p.read_text()

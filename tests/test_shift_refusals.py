@@ -8,6 +8,8 @@ reference value is from that law (or the straight model's numbers), never from t
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 import pytest
 
@@ -161,6 +163,26 @@ def test_a_corner_between_two_readings_does_not_stop_the_kink_fit_before_the_loa
         placed += k is not None and abs(k.at - 7.4) <= 0.1 and k.n_after == past
     assert placed == 100
     assert stopped >= 4, stopped
+
+
+def test_the_motors_cogging_ripple_is_taken_out_of_the_readings():
+    # the dead zone [-3, 11] (the straight [-5, 9] shifted by +2), the loaded slope 4 mA/deg,
+    # and the motor's cogging: 2.5 mA at a 5 deg period of knob angle, whose steepest slope
+    # (2 pi 2.5 / 5 = 3.1 mA/deg) is past eps_lower (1.41). Read as it comes, the ripple bends
+    # the loaded line and the kink lands 0.65-0.9 deg early, with exit 0. The identification
+    # read that ripple on the sweep's dead zone (KnobIdentification.cogging_*): taken out of
+    # every reading, the edge gives the offset
+    base = tendons(-3.0, 11.0)
+
+    def law(q: float, d: float) -> float:
+        return base(q, d) + 2.5 * math.sin(2 * math.pi * q / 5.0)
+
+    cogged = model(cogging_period=5.0, cogging_sin=2.5, cogging_cos=0.0)
+    for seed in range(8):
+        r = detect_shift(cogged, Knob(law, seed=seed), 1)
+        assert r.offset == pytest.approx(2.0, abs=0.15), seed
+        plain = detect_shift(model(), Knob(law, seed=seed), 1)
+        assert abs(plain.offset - 2.0) > 0.5, seed
 
 
 def test_quantised_readings_are_split_into_as_many_pieces_as_their_noise_pays_for():

@@ -25,7 +25,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..current import condition
+from ..current import cogging_ripple, condition
 from ..errors import IdentificationError, ModelError
 from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
@@ -450,7 +450,14 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         slope_loaded = abs(reading.loaded_slope)
     else:
         slope_loaded = float(np.ptp(c)) / max(float(np.ptp(q)), 1e-9)
-    slope_dz = _dead_zone_slope(q, c, chk, lo, hi)
+    # the motor's cogging, read where no tendon is taut: periodic in the knob angle, the same
+    # either way the knob turns; the dead zone's slope is the search's threshold floor, so it
+    # is read without the ripple the search takes out of its readings
+    ripple = None
+    flat = slack & on_flat & (dq != 0)
+    if flat.sum() >= 60:
+        ripple = cogging_ripple(q[flat], c[flat], (dq[flat] < 0).astype(int))
+    slope_dz = _dead_zone_slope(q, c if ripple is None else c - ripple(q), chk, lo, hi)
     noise = reading.noise if reading is not None else None
     return KnobIdentification(
         slope_dead_zone=slope_dz, slope_loaded=slope_loaded, q_min=chk.q_min, q_max=chk.q_max,
@@ -459,7 +466,9 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         current_edge_pos=None if reading is None else reading.edges.get("pos"),
         current_edge_neg=None if reading is None else reading.edges.get("neg"),
         current_arrive_rising=None if reading is None else reading.arrivals.get(1),
-        current_arrive_falling=None if reading is None else reading.arrivals.get(-1), unfixed=unfixed)
+        current_arrive_falling=None if reading is None else reading.arrivals.get(-1), unfixed=unfixed,
+        cogging_period=None if ripple is None else ripple.period,
+        cogging_sin=None if ripple is None else ripple.sin, cogging_cos=None if ripple is None else ripple.cos)
 
 
 def _dead_zone_slope(q: np.ndarray, c: np.ndarray, chk: SweepCheck, lo: float, hi: float) -> float:
