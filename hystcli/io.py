@@ -585,6 +585,10 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
             )
         except KeyError as exc:
             raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
+        except ModelError as exc:
+            if str(exc).startswith(str(source)):
+                raise
+            raise ModelError(f"{source}: knob {key}'s {exc}") from None
     return Model(knobs, geometry, tuple(effects), meta, ident)
 
 

@@ -552,6 +552,18 @@ class KnobIdentification:
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
         object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
+        cog = (self.cogging_period, self.cogging_sin, self.cogging_cos)
+        if any(v is not None for v in cog):
+            # the search takes the ripple out of every reading: half a ripple, or a period that
+            # is no period, would put a wrong or non-finite current in front of it
+            if any(v is None for v in cog):
+                raise ModelError("identification: cogging_period, cogging_sin and cogging_cos go together "
+                                 "(a model file gives all three or none)")
+            if not (math.isfinite(self.cogging_period) and self.cogging_period > 0):
+                raise ModelError(f"identification: cogging_period must be a positive number of deg, "
+                                 f"got {self.cogging_period!r}")
+            if not (math.isfinite(self.cogging_sin) and math.isfinite(self.cogging_cos)):
+                raise ModelError("identification: cogging_sin and cogging_cos must be finite")
 
     OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
                 "current_edge_pos", "current_edge_neg", "current_arrive_rising", "current_arrive_falling",

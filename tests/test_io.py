@@ -287,3 +287,20 @@ def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
     # a model without one writes no cogging keys (older files read the same)
     save_model(p, sample_model())
     assert "cogging" not in p.read_text()
+
+
+@pytest.mark.parametrize("fields, message", [
+    ({"cogging_period": 0.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
+    ({"cogging_period": -3.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
+    ({"cogging_period": 4.0, "cogging_sin": 1.0}, "go together"),
+])
+def test_a_bad_cogging_ripple_in_a_model_file_is_one_clear_error(tmp_path, fields, message):
+    import json
+
+    p = tmp_path / "m.json"
+    save_model(p, sample_model())
+    d = json.loads(p.read_text())
+    d["identification"]["1"].update(fields)
+    p.write_text(json.dumps(d))
+    with pytest.raises(ModelError, match=message):
+        load_model(p)
