@@ -95,3 +95,26 @@ def test_detect_shift_says_when_its_offset_came_from_a_walk_back(tmp_path):
     got = json.loads(res.stdout)["knobs"]["1"]
     assert got["walked_back"] is True and got["start_outside"] is True and got["edge"] == "neg"
     assert abs(got["offset"] - case.offset) <= 0.5
+
+
+def test_identify_reports_the_motors_cogging_where_the_sweep_shows_it(tmp_path):
+    # design replays' straight sweeps: 1014 a coulomb-viscous plant whose current ripples with
+    # the knob angle, 108 a plain stretch law. identify says what it read and the model file
+    # keeps it (detect-shift takes it out of its readings); a sweep with no ripple gets no line
+    for seed, family in ((1014, "coulomb-viscous"), (108, "stretch")):
+        case = plants.replay_case(seed)
+        assert case.family == family
+        sweep, out = tmp_path / f"s{seed}.csv", tmp_path / f"m{seed}.json"
+        sweep.write_text(case.straight_sweep.csv_text())
+        res = runner.invoke(app, ["identify", str(sweep), "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        ripple = load_model(out).identification[1].ripple
+        lines = [ln for ln in res.stdout.splitlines() if "cogging ripple" in ln]
+        if family == "stretch":
+            assert ripple is None and not lines
+            continue
+        assert ripple is not None and len(lines) == 1
+        assert f"+-{ripple.amplitude:.3g} mA every {ripple.period:.3g} deg" in lines[0]
+        res = runner.invoke(app, ["identify", str(sweep), "-o", str(out), "--format", "json"])
+        got = json.loads(res.stdout[:res.stdout.rindex("}") + 1])["1"]["cogging"]
+        assert got["period"] == pytest.approx(ripple.period) and got["amplitude"] == pytest.approx(ripple.amplitude)

@@ -77,13 +77,21 @@ def identify_cmd(
         pass
     elif fmt == OutputFormat.json:
         echo_json({str(k): {"params": f.model.params(), "stderr": dict(f.stderr), "rmse": f.rmse,
-                            "method": f.method, "warnings": list(f.warnings)} for k, f in result.fits.items()})
+                            "method": f.method, "warnings": list(f.warnings),
+                            "cogging": _cogging(result, k)} for k, f in result.fits.items()})
     elif fmt == OutputFormat.table:
         for line in _identify_lines(result):
             typer.echo(line)
     else:
         echo_table(_identify_table(result), fmt)
     info(f"wrote {output}" + (f" and {plot}" if plot is not None else ""), quiet)
+
+
+def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
+    """The cogging ripple identify read on this knob's current, for ``--format json``."""
+    ident = result.model.identification.get(knob) if result.model.identification else None
+    r = None if ident is None else ident.ripple
+    return None if r is None else {"period": r.period, "sin": r.sin, "cos": r.cos, "amplitude": r.amplitude}
 
 
 def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identification
@@ -98,6 +106,11 @@ def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identificat
             value = getattr(fit.model, name)
             err = fit.stderr.get(name)
             lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else "  (assumed)"))
+        ident = result.model.identification.get(k) if result.model.identification else None
+        ripple = None if ident is None else ident.ripple
+        if ripple is not None:
+            lines.append(f"  motor current: a cogging ripple of +-{ripple.amplitude:.3g} mA every {ripple.period:.3g} deg "
+                         "of knob (detect-shift takes it out of its readings)")
     return lines
 
 
