@@ -572,8 +572,9 @@ class KnobIdentification:
 
     @property
     def ripple(self):  # noqa: ANN201 - hystcli.current.Ripple or None
-        """The cogging ripple as a :class:`hystcli.current.Ripple`, None when the sweep showed none."""
-        if self.cogging_period is None or self.cogging_sin is None or self.cogging_cos is None:
+        """The cogging ripple as a :class:`hystcli.current.Ripple`, None when the sweep showed none
+        (the three fields come together: :meth:`__post_init__`)."""
+        if self.cogging_period is None:
             return None
         from .current import Ripple
 

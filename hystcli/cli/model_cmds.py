@@ -87,10 +87,15 @@ def identify_cmd(
     info(f"wrote {output}" + (f" and {plot}" if plot is not None else ""), quiet)
 
 
-def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
-    """The cogging ripple identify read on this knob's current, for ``--format json``."""
+def _ripple(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification -> current.Ripple or None
+    """The cogging ripple identify read on this knob's current, or None."""
     ident = result.model.identification.get(knob) if result.model.identification else None
-    r = None if ident is None else ident.ripple
+    return None if ident is None else ident.ripple
+
+
+def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
+    """:func:`_ripple` for ``--format json``."""
+    r = _ripple(result, knob)
     return None if r is None else {"period": r.period, "sin": r.sin, "cos": r.cos, "amplitude": r.amplitude}
 
 
@@ -106,8 +111,7 @@ def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identificat
             value = getattr(fit.model, name)
             err = fit.stderr.get(name)
             lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else "  (assumed)"))
-        ident = result.model.identification.get(k) if result.model.identification else None
-        ripple = None if ident is None else ident.ripple
+        ripple = _ripple(result, k)
         if ripple is not None:
             lines.append(f"  motor current: a cogging ripple of +-{ripple.amplitude:.3g} mA every {ripple.period:.3g} deg "
                          "of knob (detect-shift takes it out of its readings)")
