@@ -39,8 +39,12 @@ What counts, per case:
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
   searched by ``hyst detect-shift --port`` (the first 40 of ``--n``).
 
+* ``--straight current``: the shift bench identifies the straight model from the sweep's motor
+  current alone (the paper's protocol) instead of the tip fit, and counts the plants whose sweep
+  identify refuses apart (no true-loop stand-in).
+
 Run: ``python bench/zoo.py`` (500 sweeps and 500 replays, several minutes on 2 cores); ``--n``,
-``--seed``, ``--only identify|shift|live``.
+``--seed``, ``--only identify|shift|live``, ``--straight tip|current``.
 """
 from __future__ import annotations
 
@@ -366,20 +370,24 @@ def model_lacks_edge(model: Model, case: plants.ReplayCase, q: np.ndarray) -> bo
     return ident is not None and needed_edge(case, q)[0] in ident.unfixed
 
 
-def straight_model(case: plants.ReplayCase) -> tuple[Model, str]:
+def straight_model(case: plants.ReplayCase, use_tip: bool = True) -> tuple[Model | None, str]:
     """The model a user would have: identified on the straight sweep (tip fit); when the sweep
-    cannot identify it, the true loop with the current levels read on that sweep."""
+    cannot identify it, the true loop with the current levels read on that sweep. With
+    ``use_tip`` False, identified from the sweep's current alone (the paper's protocol), and None
+    where identify refuses."""
     run = parse_run(case.straight_sweep.csv_text(), source="straight")
     try:
-        return identify(run, use_tip=True).model, "identified"
+        return identify(run, use_tip=use_tip).model, "identified"
     except HystError:
+        if not use_tip:
+            return None, "refused"
         tr = case.truth
         km = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
                        h_pos=tr.h_pos, h_neg=tr.h_neg)
         return Model({1: km}, identification={1: current_levels(run, 1, km)}), "true loop"
 
 
-def bench_shift(n: int, seed: int) -> None:
+def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
     stats: dict = defaultdict(lambda: defaultdict(int))
     errs: list[float] = []
     nulls: list[float] = []
@@ -390,7 +398,10 @@ def bench_shift(n: int, seed: int) -> None:
     for s in range(seed, seed + n):
         case = plants.replay_case(s)
         fam = case.family
-        model, how = straight_model(case)
+        model, how = straight_model(case, use_tip)
+        if model is None:
+            stats[fam]["identify refused"] += 1
+            continue
         rep = parse_run(case.replay.csv_text(), source=f"replay-{s}")
         travel = shift.default_max_travel(model, 1)
         q = np.asarray(rep["q1"], float)
@@ -436,9 +447,10 @@ def bench_shift(n: int, seed: int) -> None:
             silent.append(f"seed {s} ({fam}, {how}): offset {r.offset:+.2f}, true {case.offset:+.2f}")
             errs.append(abs(e))
     dt = time.perf_counter() - t0
-    cols = ("ok (reach)", "refused (reach)", "ok (beyond)", "refused (beyond)", "0.5-2 deg", "silent > 2 deg")
+    cols = ("ok (reach)", "refused (reach)", "ok (beyond)", "refused (beyond)", "0.5-2 deg", "silent > 2 deg") + (
+        () if use_tip else ("identify refused",))
     print(f"\ndetect-shift on replays, {n} zoo plants from seed {seed} (the straight model identified on "
-          f"the plant's straight sweep), {dt:.1f} s")
+          f"the plant's straight sweep, {'tip fit' if use_tip else 'current only'}), {dt:.1f} s")
     print("reach: the replay crosses the edge the search has to find within the travel limit, or (a taut "
           "start) goes on until the tendon is slack and comes back across its edge; beyond: neither")
     print(f"{'family':18s} " + " ".join(f"{c:>16s}" for c in cols))
@@ -521,12 +533,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--n", type=int, default=500)
     ap.add_argument("--seed", type=int, default=100_000)
     ap.add_argument("--only", choices=("identify", "shift", "live"), default=None)
+    ap.add_argument("--straight", choices=("tip", "current"), default="tip",
+                    help="how the shift bench identifies the straight model (default: the tip fit)")
     args = ap.parse_args(argv)
     if args.only in (None, "identify"):
         bench_identify(args.n, args.seed, use_tip=True)
         bench_identify(args.n, args.seed, use_tip=False)
     if args.only in (None, "shift"):
-        bench_shift(args.n, args.seed)
+        bench_shift(args.n, args.seed, use_tip=args.straight == "tip")
     if args.only in (None, "live"):
         bench_live(min(args.n, 40), args.seed)
     return 0

@@ -744,6 +744,7 @@ def _validate(model: Model, runs: Sequence[Run]) -> list[str]:
     mc = str(model.meta.get("catheter", "") or "").strip()
     if mc and catheters and mc not in catheters:
         raise DataError(f"the model is of catheter {mc} but the runs are of {next(iter(catheters))}")
+    model.require_loop(list(model.knobs), "diagnose")
     for name, r in zip(names, runs):
         r.require("t")
         for k in knobs_of(model, r, "q", "knob command", name=name):

@@ -39,8 +39,10 @@ def parameter_table(model: Model) -> Table:
     for k, knob in model.knobs.items():
         ident = model.identification.get(k)
         stderr = dict(ident.stderr) if ident is not None else {}
+        unfixed = ident.unfixed if ident is not None else ()
         for name, value in _knob_values(knob).items():
-            rows.append((k, name, value, stderr.get(name), "derived" if name in DERIVED else ""))
+            note = "derived" if name in DERIVED else "not fixed by the sweep" if name in unfixed else ""
+            rows.append((k, name, value, stderr.get(name), note))
     return Table(("knob", "parameter", "value", "stderr", "note"),
                  ("knob", "parameter", "value", "+- (1 sigma)", "note"), tuple(rows),
                  ("deg (omega: deg of tip per deg of knob); dhat: far edges of the dead zone; "
@@ -80,6 +82,7 @@ def model_summary(model: Model) -> dict[str, Any]:
             "params": knob.params(),
             "derived": {name: float(getattr(knob, name)) for name in DERIVED},
             "stderr": dict(ident.stderr) if ident is not None else {},
+            "unfixed": list(ident.unfixed) if ident is not None else [],
             "identification": (None if ident is None else
                                {name: getattr(ident, name) for name in _IDENT_FIELDS}),
         }
@@ -167,8 +170,11 @@ def envelope_figure(model: Model, fmt: str = "png", q_range: Sequence[float] | N
         ax.axvline(knob.shifted_d_pos, color="0.3", lw=0.8, ls="--")
         ax.set_xlabel(f"knob angle q{k} (deg)")
         ax.set_ylabel(f"tip angle y{k} (deg)")
+        unfixed_b = [n for n in ("b_neg", "b_pos") if ident is not None and n in ident.unfixed]
         ax.set_title(f"knob {k}: d {knob.d_neg:.2f} / {knob.d_pos:.2f}, b {knob.b_neg:.2f} / {knob.b_pos:.2f}, "
-                     f"omega {knob.omega:.3f}, offset {knob.offset:+.2f}", fontsize=8)
+                     f"omega {knob.omega:.3f}, offset {knob.offset:+.2f}"
+                     + (f"\n{' and '.join(unfixed_b)} not fixed by the sweep: drawn as 0" if unfixed_b else ""),
+                     fontsize=8)
         ax.grid(True, lw=0.3)
         ax.legend(fontsize=7, loc="upper left")
     fig.tight_layout()

@@ -24,7 +24,7 @@ from typing import Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from .errors import DataError, HystError, ModelError
-from .model import (PARAM_NAMES, EffectSpec, Geometry, KnobIdentification, KnobModel, Model)
+from .model import (PARAM_NAMES, UNFIXABLE, EffectSpec, Geometry, KnobIdentification, KnobModel, Model)
 
 MODEL_FORMAT = "hyst-model"
 MODEL_VERSION = 1
@@ -581,7 +581,7 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
                 stderr={k: _num(v, f"identification stderr {k}") for k, v in (d.get("stderr") or {}).items()},
                 **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
                    for name in KnobIdentification.OPTIONAL},
-                unfixed=_edge_names(d.get("unfixed"), source),
+                unfixed=_unfixed_names(d.get("unfixed"), source),
             )
         except KeyError as exc:
             raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
@@ -592,11 +592,11 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
     return Model(knobs, geometry, tuple(effects), meta, ident)
 
 
-def _edge_names(value: object, source: str) -> tuple[str, ...]:
+def _unfixed_names(value: object, source: str) -> tuple[str, ...]:
     if value is None:
         return ()
-    if not isinstance(value, list) or any(v not in ("d_pos", "d_neg") for v in value):
-        raise ModelError(f"{source}: identification \"unfixed\" must be a list of d_pos / d_neg")
+    if not isinstance(value, list) or any(v not in UNFIXABLE for v in value):
+        raise ModelError(f"{source}: identification \"unfixed\" must be a list of {' / '.join(UNFIXABLE)}")
     return tuple(value)
 
 

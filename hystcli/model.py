@@ -30,6 +30,9 @@ import numpy as np
 from .errors import ModelError
 
 PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
+
+UNFIXABLE = ("d_pos", "d_neg", "b_pos", "b_neg")
+"""Parameters an identification may leave unfixed (:attr:`KnobIdentification.unfixed`)."""
 """The parameters of one knob in file order (DESIGN.md section 6)."""
 
 PAPER_OMEGA = 1.45
@@ -521,8 +524,11 @@ class KnobIdentification:
         an unloading current meets the dead zone depends on the current law, and on design
         replays of the plant zoo every disagreement was the arrival's, not the loading edge's).
     unfixed : tuple of str
-        Dead-zone edges the sweep could not place (``"d_pos"``, ``"d_neg"``): Algorithm 1 must
-        not take an offset from them.
+        Parameters the sweep could not fix (:data:`UNFIXABLE`). A dead-zone edge
+        (``"d_pos"``, ``"d_neg"``): Algorithm 1 must not take an offset from it. A backlash
+        (``"b_pos"``, ``"b_neg"``, a current-only identification whose current unloads at once
+        after a reversal): the knob model keeps 0 deg for it, so the model cannot predict or
+        compensate the tip (:meth:`Model.require_loop`), while Algorithm 1 reads the edges.
     cogging_period, cogging_sin, cogging_cos : float or None
         The motor's cogging ripple read on the sweep's dead zone
         (:func:`hystcli.current.cogging_ripple`): period (deg of knob) and the amplitudes (mA) of
@@ -552,6 +558,10 @@ class KnobIdentification:
     def __post_init__(self) -> None:
         object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
         object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
+        bad = [u for u in self.unfixed if u not in UNFIXABLE]
+        if bad:
+            raise ModelError(f"identification: unfixed names {', '.join(bad)}; only {', '.join(UNFIXABLE)} "
+                             "can be left unfixed")
         cog = (self.cogging_period, self.cogging_sin, self.cogging_cos)
         if any(v is not None for v in cog):
             # the search takes the ripple out of every reading: half a ripple, or a period that
@@ -629,6 +639,33 @@ class Model:
         object.__setattr__(self, "effects", tuple(self.effects))
         object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
         object.__setattr__(self, "identification", MappingProxyType(dict(self.identification)))
+
+    def require_loop(self, knobs: Sequence[int], what: str) -> None:
+        """Refuse to predict or compensate with a knob whose backlash its identification left
+        unfixed (a current-only sweep whose current unloads at once after each reversal).
+
+        Parameters
+        ----------
+        knobs : sequence of int
+            The knobs about to be used.
+        what : str
+            What the caller does, for the message (``"predict the tip"``).
+
+        Raises
+        ------
+        ModelError
+            When such a knob is among ``knobs``.
+        """
+        for k in knobs:
+            ident = self.identification.get(int(k))
+            unfixed = [u for u in ("b_pos", "b_neg") if ident is not None and u in ident.unfixed]
+            if unfixed:
+                raise ModelError(
+                    f"cannot {what} with this model: knob {k}'s {' and '.join(unfixed)} "
+                    f"{'were' if len(unfixed) > 1 else 'was'} not fixed by its sweep (the motor current "
+                    "unloads at once after a reversal, so it does not show the backlash), and the model keeps "
+                    f"0 deg in their place; identify knob {k} with the tip angle measured. detect-shift can "
+                    "still use this model")
 
     def knob(self, k: int) -> KnobModel:
         """The model of knob ``k`` (1 or 2)."""

@@ -1506,8 +1506,11 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
     search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(direction), margin,
                      progress)
     search.edges = {1: km.d_pos, -1: km.d_neg}
-    search.backlash = {1: km.b_neg, -1: km.b_pos}
     ident = model.identification.get(k)
+    # a backlash the sweep could not fix (kept as 0 deg) bounds no plateau: any flat may be one
+    unfixed = () if ident is None else ident.unfixed
+    search.backlash = {1: math.inf if "b_neg" in unfixed else km.b_neg,
+                       -1: math.inf if "b_pos" in unfixed else km.b_pos}
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
     start = search.start

@@ -408,6 +408,7 @@ class Compensator:
             raise ModelError(f"a compensator needs distinct knobs, got {self._knobs}")
         for k in self._knobs:
             model.knob(k)
+        model.require_loop(self._knobs, "compensate")
         if latency not in LATENCY_MODES:
             raise ModelError(f"latency must be one of {', '.join(LATENCY_MODES)}, got {latency!r}")
         if dt is not None and not (math.isfinite(dt) and dt > 0):

@@ -19,7 +19,7 @@ from hystcli import twin
 from hystcli.errors import DataError, IdentificationError
 from hystcli.identify import check_sweep, find_reversals, identify, plot_identification
 from hystcli.io import Run
-from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
+from hystcli.model import PAPER_OMEGA, Geometry, KnobModel, Model
 
 N_SETS = 12
 
@@ -440,8 +440,8 @@ def test_current_only_does_not_read_a_backlash_the_current_does_not_hold(seed, f
     # independent plants (hystcli.zoo.plants, design seeds): their truth says which law holds
     case = plants.sweep_case(seed, tip=False)
     assert case.family == family
-    with pytest.raises(IdentificationError, match=f"the current cannot fix .*{name}"):
-        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    _assert_backlash_unfixed(fit, case.truth, name)
 
 
 @pytest.mark.parametrize("seed", [271, 471])
@@ -471,6 +471,20 @@ def _zoo_current_fit(seed: int):
 
     case = plants.sweep_case(seed, tip=False)
     return case, identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+
+
+def _assert_backlash_unfixed(fit, truth, name: str):
+    """The current did not fix backlash ``name``: the model comes back for its edges (claimed, and
+    within a degree), with ``name`` unclaimed, listed as unfixed and said so, and a model that
+    refuses to predict the tip."""
+    from hystcli.errors import ModelError
+
+    assert name not in fit.stderr and name in fit.ident.unfixed
+    assert any("the current cannot fix" in w and name in w for w in fit.warnings)
+    _assert_within(fit, truth, ("d_pos", "d_neg"))
+    model = Model({1: fit.model}, identification={1: fit.ident})
+    with pytest.raises(ModelError, match=f"knob 1's .*{name}.* not fixed by its sweep"):
+        model.predict(Run({"t": np.arange(3.0), "q1": np.zeros(3)}))
 
 
 def _assert_within(fit, truth, names, tol: float = 1.0):
@@ -637,8 +651,8 @@ def test_current_only_judges_a_wall_against_the_loaded_slope_of_the_reversal_str
     # elastic against it and was read as the sheath friction flipping: b_pos 8.3 deg too wide
     # (found on held-out seed 400166, checked on this design seed)
     case = plants.sweep_case(1732, tip=False)
-    with pytest.raises(IdentificationError, match="the current cannot fix"):
-        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    _assert_backlash_unfixed(fit, case.truth, "b_pos")
 
 
 def test_a_stiffening_cables_steep_unloading_after_a_held_plateau_is_unloading_not_backlash():
@@ -731,10 +745,10 @@ def test_current_only_refuses_a_plateau_many_times_its_unloading():
     # three times the travel over which it then unloads, and the held travel is short of the
     # backlash (10.2 deg read against b_neg 12.0): a tendon that must let go before the knob has
     # travelled the whole backlash. A plateau more than HELD_RATIO times its unloading is not
-    # taken for the backlash: refused, not returned 1.8 deg short
+    # taken for the backlash: left unfixed, not returned 1.8 deg short
     case = plants.sweep_case(255, tip=False)
-    with pytest.raises(IdentificationError, match="cannot fix b_"):
-        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    _assert_backlash_unfixed(fit, case.truth, "b_neg")
 
 
 def test_current_only_reads_a_pretensioned_plateau_against_the_dead_zone_slope():
@@ -831,8 +845,8 @@ def test_current_only_refuses_the_backlash_of_a_slow_turn_on_a_stretch_law():
     from hystcli.zoo import plants
 
     case = plants.sweep_case(2100090, tip=False)
-    with pytest.raises(IdentificationError, match="shows no backlash plateau"):
-        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    _assert_backlash_unfixed(fit, case.truth, "b_pos")
 
 
 def test_a_loading_edge_after_a_gentle_unloading_is_fitted_on_the_dead_zone_alone():
@@ -895,3 +909,14 @@ def test_a_flat_the_tip_sat_at_since_the_records_start_does_not_place_its_edge()
     assert any("d_pos is not fixed by this record" in w and "record's start" in w for w in fit.warnings)
     for name in ("d_neg", "omega"):
         assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 0.5, name
+
+
+def test_current_only_a_plateau_on_the_records_last_stretch_alone_is_weighed_with_the_complete_ones():
+    # independent plant (design seed 184, drop-at-reversal law without a hold: no backlash in its
+    # current): neither of the two complete stretches down from the top reversal showed a
+    # plateau, and the stretch cut by the record's end did (8.2 deg against no backlash); taken
+    # alone because no complete one showed it, b_pos came back 4.9 deg off the tip's b_pos. It
+    # is one of three now, and left unfixed
+    case, fit = _zoo_current_fit(184)
+    assert not case.current_shows_backlash
+    _assert_backlash_unfixed(fit, case.truth, "b_pos")

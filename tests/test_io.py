@@ -304,3 +304,21 @@ def test_a_bad_cogging_ripple_in_a_model_file_is_one_clear_error(tmp_path, field
     p.write_text(json.dumps(d))
     with pytest.raises(ModelError, match=message):
         load_model(p)
+
+
+def test_an_unfixed_backlash_round_trips_through_the_model_file(tmp_path):
+    import json
+
+    # a current-only identification whose current unloads at once after each reversal: the
+    # backlash stays in the file as 0 deg, listed as unfixed, and reads back the same
+    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, unfixed=("b_pos", "b_neg"))
+    m = Model({1: KnobModel(9.1, -8.7, 0.0, 0.0, 1.45, 0.0, 0.0)}, identification={1: ident})
+    p = tmp_path / "m.json"
+    save_model(p, m)
+    assert load_model(p).identification[1].unfixed == ("b_pos", "b_neg")
+    # a name that is not a parameter identify can leave unfixed is one clear error
+    d = json.loads(p.read_text())
+    d["identification"]["1"]["unfixed"] = ["b_pos", "omega"]
+    p.write_text(json.dumps(d))
+    with pytest.raises(ModelError, match="unfixed.* d_pos / d_neg / b_pos / b_neg"):
+        load_model(p)

@@ -260,3 +260,33 @@ def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
         last_p = py(data, *args, *extra, plain)
         # same operations in the same order: bit for bit, not approximately
         assert np.array_equal(compiled, plain) and last_c == last_p
+
+
+def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_compensate():
+    from hystcli.diagnose import diagnose
+    from hystcli.io import Run
+    from hystcli.model import KnobIdentification
+    from hystcli.stream import Compensator
+
+    # a current-only identification whose current unloads at once after each reversal keeps
+    # b_pos / b_neg as 0 deg, unfixed: every use of the loop on the tip refuses it, naming the knob
+    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, unfixed=("b_neg",))
+    knob = KnobModel(9.1, -8.7, 6.0, 0.0, 1.45, -4.0, 4.0)
+    model = Model({1: knob, 2: knob}, identification={1: ident})
+    t = np.arange(0.0, 1.0, 0.01)
+    run = Run({"t": t, "q1": 10 * np.sin(t), "y1": np.zeros_like(t), "r1": np.sin(t)})
+    with pytest.raises(ModelError, match="cannot predict the tip .*knob 1's b_neg was not fixed by its sweep"):
+        model.predict(run)
+    with pytest.raises(ModelError, match="cannot compensate .*knob 1's b_neg"):
+        model.compensate(run)
+    with pytest.raises(ModelError, match="cannot compensate .*knob 1's b_neg"):
+        Compensator(model, knobs=[1], dt=0.01)
+    with pytest.raises(ModelError, match="cannot diagnose .*knob 1's b_neg"):
+        diagnose(model, [run, run])
+    # knob 2's loop is whole: it predicts and compensates as before
+    run2 = Run({"t": t, "q2": 10 * np.sin(t), "r2": np.sin(t)})
+    assert np.array_equal(model.predict(run2)["y2"], knob.forward(run2["q2"]))
+    Compensator(model, knobs=[2], dt=0.01)
+    # a name identify cannot leave unfixed is refused at the boundary
+    with pytest.raises(ModelError, match="unfixed names omega"):
+        KnobIdentification(0.05, 4.8, -40.0, 40.0, unfixed=("omega",))

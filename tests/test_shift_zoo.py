@@ -212,3 +212,24 @@ def test_a_loading_edge_is_not_vetoed_by_where_an_unloading_current_met_the_dead
     # refused on the disagreement ("the readings disagree"); the loading edge gave +2.39
     r = _right_or_refused(seed)
     assert r is not None
+
+
+def test_a_current_only_model_reads_no_load_past_a_held_load_it_could_not_call_backlash():
+    # design replay 255 (tip-load): the straight sweep's current holds the negative tendon's load
+    # 12 deg into a 13-deg dead zone, longer than HELD_RATIO times its unloading, so identify
+    # --current-only leaves the backlash unfixed. Read over the whole dead zone, the rising
+    # no-load level took that held load in (11 mA off) and detect-shift returned -17.8 deg against
+    # a true -12.7, exit 0; read just before the loading edge, it is the no-load level
+    from hystcli.identify import identify
+
+    case = plants.replay_case(255)
+    model = identify(parse_run(case.straight_sweep.csv_text(), source="straight"), use_tip=False).model
+    ident = model.identification[1]
+    assert set(ident.unfixed) == {"b_pos", "b_neg"}
+    assert ident.no_load_rising == pytest.approx(ident.no_load_falling, abs=1.0)
+    rep = parse_run(case.replay.csv_text(), source="replay-255")
+    try:
+        r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
+    except ShiftDetectionError:
+        return
+    assert r.offset == pytest.approx(case.offset, abs=0.5)

@@ -118,3 +118,29 @@ def test_identify_reports_the_motors_cogging_where_the_sweep_shows_it(tmp_path):
         res = runner.invoke(app, ["identify", str(sweep), "-o", str(out), "--format", "json"])
         got = json.loads(res.stdout[:res.stdout.rindex("}") + 1])["1"]["cogging"]
         assert got["period"] == pytest.approx(ripple.period) and got["amplitude"] == pytest.approx(ripple.amplitude)
+
+
+@pytest.mark.parametrize("seed", [3, 11])
+def test_current_only_model_without_backlash_detects_the_shift_and_refuses_to_predict(tmp_path, seed):
+    # design replays whose straight sweep's current unloads at once after each reversal: identify
+    # --current-only (the paper's protocol) used to stop there. It now writes the edges, says the
+    # backlash is not fixed, and detect-shift finds the shift with that model; predict refuses it
+    case = plants.replay_case(seed)
+    sweep, rep = tmp_path / "sweep.csv", tmp_path / "replay.csv"
+    sweep.write_text(case.straight_sweep.csv_text())
+    rep.write_text(case.replay.csv_text())
+    model, shifted, out = tmp_path / "m.json", tmp_path / "s.json", tmp_path / "p.csv"
+    res = runner.invoke(app, ["identify", str(sweep), "--current-only", "-o", str(model)])
+    assert res.exit_code == 0, res.output
+    assert "the current cannot fix b_pos and b_neg" in res.stderr
+    assert [ln.split()[0] for ln in res.stdout.splitlines() if ln.endswith("(not fixed)")] == ["b_pos", "b_neg"]
+    assert load_model(model).identification[1].unfixed == ("b_pos", "b_neg")
+    truth = case.truth
+    m = load_model(model).knob(1)
+    assert abs(m.d_pos - truth.d_pos) <= 1.0 and abs(m.d_neg - truth.d_neg) <= 1.0
+    res = runner.invoke(app, ["detect-shift", "--model", str(model), "--replay", str(rep), "-o", str(shifted), "-q"])
+    assert res.exit_code == 0, res.output
+    assert abs(load_model(shifted).knob(1).offset - case.offset) <= 0.5
+    res = runner.invoke(app, ["predict", str(rep), "--model", str(shifted), "-o", str(out)])
+    assert res.exit_code == 1 and not out.exists()
+    assert "knob 1's b_pos and b_neg were not fixed by its sweep" in _error_line(res)

@@ -78,7 +78,8 @@ def identify_cmd(
     elif fmt == OutputFormat.json:
         echo_json({str(k): {"params": f.model.params(), "stderr": dict(f.stderr), "rmse": f.rmse,
                             "method": f.method, "warnings": list(f.warnings),
-                            "cogging": _cogging(result, k)} for k, f in result.fits.items()})
+                            "cogging": _cogging(result, k), "unfixed": list(_unfixed(result, k))}
+                   for k, f in result.fits.items()})
     elif fmt == OutputFormat.table:
         for line in _identify_lines(result):
             typer.echo(line)
@@ -91,6 +92,12 @@ def _ripple(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identificatio
     """The cogging ripple identify read on this knob's current, or None."""
     ident = result.model.identification.get(knob) if result.model.identification else None
     return None if ident is None else ident.ripple
+
+
+def _unfixed(result, knob: int) -> tuple[str, ...]:  # noqa: ANN001 - identify.Identification
+    """The parameters identify left unfixed on this knob (kept in the model without an uncertainty)."""
+    ident = result.model.identification.get(knob) if result.model.identification else None
+    return () if ident is None else ident.unfixed
 
 
 def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
@@ -110,7 +117,9 @@ def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identificat
                 continue
             value = getattr(fit.model, name)
             err = fit.stderr.get(name)
-            lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else "  (assumed)"))
+            lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else
+                                                         "  (not fixed)" if name in _unfixed(result, k) else
+                                                         "  (assumed)"))
         ripple = _ripple(result, k)
         if ripple is not None:
             lines.append(f"  motor current: a cogging ripple of +-{ripple.amplitude:.3g} mA every {ripple.period:.3g} deg "

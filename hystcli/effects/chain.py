@@ -405,6 +405,8 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
     if not knobs:
         raise DataError(f"{run.source or 'run'}: no command column for the model's knobs "
                         f"({', '.join(f'q{k}' for k in model.knobs)})")
+    # the other knob's bend feeds a coupling stage: its loop must be whole too
+    model.require_loop(knobs if not effs else [k for k in model.knobs if k in q], "predict the tip")
     t = np.ascontiguousarray(run["t"], dtype=np.float64) if "t" in run else None
     out: dict[int, np.ndarray] = {}
     def first_y(k: int) -> float:
@@ -505,6 +507,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
     use = [int(k) for k in (knobs if knobs is not None else run.knobs("r"))]
     if not use:
         raise DataError(f"{run.source or 'run'}: no desired tip angle column (r1 or r2)")
+    model.require_loop(use, "compensate")
     offs = model.offsets_for(run.meta) if offsets is None else dict(offsets)
     shape = Shape.parse(run.meta.get("shape"))
     cond = run_condition(run.meta, run.source)

@@ -29,7 +29,7 @@ from ..current import cogging_ripple, condition
 from ..errors import IdentificationError, ModelError
 from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
-from .current import CurrentReading, conditioned_current, read_current
+from .current import UNLOAD_LEVEL, CurrentReading, conditioned_current, read_current
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
@@ -333,6 +333,18 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                             f"state the current cannot tell: d_{side} = {getattr(model, f'd_{side}'):.2f} deg is an "
                             "estimate (it may lie beyond the edge), left without an uncertainty, and Algorithm 1 "
                             "will not use it; sweep a full cycle past both edges")
+        unshown = [f"b_{s}" for s in ("pos", "neg") if s not in reading.backlash]
+        if unshown:
+            # the edges stand on their own (the loading kinks), and detect-shift needs no more;
+            # a current that unloads at once cannot tell a backlash narrower than its resolution
+            # from a law that does not carry the backlash at all (the tendon's stretch)
+            names = " and ".join(unshown)
+            warnings.append(f"{where_k}: the current cannot fix {names}: after a reversal it shows no backlash "
+                            "plateau (it unloads at once, as a current that follows the tendon's stretch does). "
+                            f"The model keeps {names} = 0 deg, without an uncertainty, and marks "
+                            f"{'them' if len(unshown) > 1 else 'it'} unfixed: detect-shift uses its edges, "
+                            "predict, compensate and diagnose refuse it; identify with the tip angle measured "
+                            "for a whole model")
         rmse = None
         if yname in run:
             rmse = float(np.sqrt(np.mean((model.forward(q, float(run[yname][0])) - run[yname]) ** 2)))
@@ -342,7 +354,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     if c is not None:
         ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
                         tuple(fit.sliding) + tuple(ambiguous_edges) if fit is not None
-                        else tuple(f"d_{s}" for s in reading.first_only))
+                        else tuple(f"d_{s}" for s in reading.first_only)
+                        + tuple(f"b_{s}" for s in ("pos", "neg") if s not in reading.backlash))
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))
@@ -371,19 +384,14 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
             f"{where_k}: the motor current never clearly shows the {side} tendon taken up (no jump in "
             f"its slope on a stretch that moves {side} through the dead zone): sweep further past the "
             "edge, or record the tip angle")
-    missing_b = [s for s in ("pos", "neg") if s not in reading.backlash]
-    if missing_b:
-        names = ", ".join(f"b_{s}" for s in missing_b)
-        raise IdentificationError(
-            f"{where_k}: the current cannot fix {names}: after a reversal it shows no backlash plateau "
-            "(it unloads at once, as a current that follows the tendon's stretch does); identify with "
-            "the tip angle measured")
     d_pos, d_neg = reading.edges["pos"], reading.edges["neg"]
     if d_pos < d_neg:
         raise IdentificationError(
             f"{where_k}: the current's edges cross (positive tendon taken up at {d_pos:.2f} deg, negative "
             f"at {d_neg:.2f} deg): no dead zone to identify")
-    b_pos, b_neg = max(reading.backlash["pos"], 0.0), max(reading.backlash["neg"], 0.0)
+    # a side whose plateau the current does not show keeps 0 deg, unclaimed (no uncertainty, and
+    # listed as unfixed): the caller says so, and predict/compensate refuse the model
+    b_pos, b_neg = max(reading.backlash.get("pos", 0.0), 0.0), max(reading.backlash.get("neg", 0.0), 0.0)
     om = PAPER_OMEGA if omega is None else float(omega)
     h_pos, h_neg = _heights_assumed(d_pos, d_neg, b_pos, b_neg, om)
     try:
@@ -392,7 +400,7 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
     except ModelError as exc:  # pragma: no cover - the heights are chosen to keep it valid
         raise IdentificationError(f"{where_k}: the current gives no valid model ({exc})") from None
     stderr = {"d_pos": reading.edges_se["pos"], "d_neg": reading.edges_se["neg"],
-              "b_pos": reading.backlash_se["pos"], "b_neg": reading.backlash_se["neg"]}
+              **{f"b_{s}": reading.backlash_se[s] for s in ("pos", "neg") if s in reading.backlash}}
     return model, stderr
 
 
@@ -431,6 +439,21 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         on = on if on.sum() >= 5 else slack & way
         levels.append(float(np.median(c[on])) if on.sum() >= 5 else None)
     no_rise, no_fall = levels
+    if fit is None and reading is not None and {"b_pos", "b_neg"} & set(unfixed):
+        # a backlash the current did not fix leaves the tip's plateaus unknown, and a held load
+        # may fill most of the knob's dead zone (one the reading refused as longer than HELD_RATIO
+        # times its unloading: design replay 255's sweep, b_neg 12 deg of a 13-deg dead zone, read
+        # its rising no-load level 11 mA off, and detect-shift went 5.1 deg wrong at exit 0). The
+        # level just before each loading edge is past any plateau; it replaces the flat's median
+        # where the two differ by more than the dead zone's own tilt across its width explains
+        # (a pretensioned dead zone climbs tens of mA from edge to edge: design replays 0-499)
+        tilt = abs(reading.dead_slope) * (model.d_pos - model.d_neg) if math.isfinite(reading.dead_slope) else 0.0
+        band = tilt + UNLOAD_LEVEL * (reading.noise if math.isfinite(reading.noise) else 0.0)
+        edge_rise, edge_fall = reading.no_load.get(1), reading.no_load.get(-1)
+        if no_rise is not None and edge_rise is not None and abs(no_rise - edge_rise) > band:
+            no_rise = edge_rise
+        if no_fall is not None and edge_fall is not None and abs(no_fall - edge_fall) > band:
+            no_fall = edge_fall
     if fit is not None:
         slack &= on_flat
     known = [v for v in (no_rise, no_fall) if v is not None]

@@ -535,16 +535,27 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             return s.plateau_held or not elastic
 
         kept = [s for i, s in enumerate(stretches[:-1]) if shown(i, s)]
-        if not kept:
-            kept = [s for i, s in enumerate(stretches) if shown(i, s)]
-        pl = [s.plateau for s in kept]
-        fit_se = [s.plateau_se for s in kept if s.plateau_se is not None]
-        arr = np.array(pl)
         # the complete stretches after a loaded reversal (the one before took the tendon up past
         # its edge): a backlash shows after most of them; a plateau after fewer than half is
         # something else (a cogging dip, a spike's tail; noise may hide one of two)
-        loaded_after = sum(1 for i, s in enumerate(stretches[:-1])
-                           if i > 0 and s.direction == -d and stretches[i - 1].edge is not None)
+        # (a stretch went past the edge when it read it, or ran a degree past where the others did)
+        e = edges.get(side)
+
+        def loaded(upto: int) -> int:
+            return sum(1 for i, s in enumerate(stretches[:upto])
+                       if i > 0 and s.direction == -d and (stretches[i - 1].edge is not None or (
+                           e is not None and d * (q[stretches[i - 1].stop] - e) > 1.0)))
+
+        loaded_after = loaded(len(stretches) - 1)
+        if not kept:
+            # the stretch cut by the record's end, counted with the complete ones it must agree
+            # with (design sweep 184: it alone read 8.2 deg where two complete ones read none,
+            # on a law with no backlash in its current)
+            kept = [s for i, s in enumerate(stretches) if shown(i, s)]
+            loaded_after = loaded(len(stretches))
+        pl = [s.plateau for s in kept]
+        fit_se = [s.plateau_se for s in kept if s.plateau_se is not None]
+        arr = np.array(pl)
         # every stretch within 0.5 deg (or 10 %) of their median: a backlash the current shows
         # the same way after every reversal
         tol = max(0.5, 0.10 * abs(float(np.median(arr)))) if arr.size else 0.5
