@@ -38,6 +38,16 @@ UNLOAD_LEVEL = 5.0
 """A loading edge read this many current-noise sigmas on the far side of the no-load level (the
 other tendon's load) is a held load starting to unload, not an edge."""
 
+WALL_AFTER = 3.0
+"""Knob travel (deg) of loaded run after a loading edge before a steeper piece counts as a wall
+that ends it (:func:`hystcli.current.loading_edge`'s ``min_run``). The corner at the edge can
+make a short piece of its own, between the flat and the loaded slope, and it was taken for the
+loaded run, the loaded slope after it for a wall: the kink, fitted on the flat and that short
+piece alone, was refused or placed early (design sweep 312, a stretch law: a 0.5-deg corner at
+1.8-2.1 mA/deg before the loaded 10.5, no edge read on either stretch down; 992: 0.43 deg early
+on one stretch, none on two). Design sweeps 0-999, current only: 2, 3 and 4 deg read 730, 737
+and 742 records right against 714 (no new silent failure at 2 and 3, one at 4)."""
+
 END_TRAVEL = 2.0
 """Knob travel (deg) before a stretch's end over which its end slope is read."""
 
@@ -213,7 +223,8 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         return out
     minlen = max(2, int(round(0.5 / width)))
     sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
-    kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
+    kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0,
+                        min_run=int(round(WALL_AFTER / width)))
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
     plateau, held, plateau_se = None, False, None
