@@ -938,3 +938,29 @@ def test_current_only_a_corner_piece_at_the_edge_is_no_loaded_run_before_a_wall(
         through = [s for s in fit.current.stretches if s.direction == d and s.from_reversal]
         assert through and all(s.edge is not None for s in through[:2]), (side, [s.edge for s in through])
     _assert_within(fit, case.truth, ("d_pos", "d_neg"), tol=0.2)
+
+
+def test_current_only_a_fall_on_the_records_cut_stretch_alone_is_no_backlash():
+    # independent plant (3000175, a pretensioned drop law whose current carries no backlash;
+    # looked at after the 3000000 range's figures): the complete stretch up from the bottom
+    # reversal showed no plateau, the stretch cut by the record's end a 28.9-deg "fall", and one
+    # of two loaded reversals passed the half-of-them rule (b_neg 21.6 deg off, exit 0). Where a
+    # complete stretch could have shown it, only a held plateau on the cut one counts
+    case, fit = _zoo_current_fit(3000175)
+    assert not case.current_shows_backlash
+    _assert_backlash_unfixed(fit, case.truth, "b_neg")
+
+
+def test_current_only_a_kink_before_its_own_stretchs_arrival_is_no_loading_edge():
+    # independent plant (3000219, drop law with a hold, one cycle of +-7.6 deg at 77 deg/s; looked
+    # at after the 3000000 range's figures): on the one stretch up from the bottom reversal the
+    # negative tendon's held load ends at -3.3 deg and its unloading meets the dead zone at -0.5;
+    # the stretch turns 0.7 deg past d_pos (5.1). The kink where the hold ended was taken for d_pos,
+    # 8.4 deg off at +-0.09. A tendon is taken up after the other one has unloaded, never before:
+    # the edge is not read, and the record cannot show d_pos
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(3000219, tip=False)
+    with pytest.raises(IdentificationError, match="never clearly shows the positive tendon taken up"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)

@@ -482,7 +482,10 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     for side, d in (("pos", +1), ("neg", -1)):
         # stretches that came through the whole dead zone from a reversal first: the record's
         # first stretch starts wherever the knob rested
-        ks = [s.edge for s in stretches if s.direction == d and s.edge is not None and s.from_reversal]
+        # (and not before its own stretch's arrival: a tendon is taken up after the other one has
+        # unloaded into the dead zone, so a kink before that is a held load ending; 3000219)
+        ks = [s.edge for s in stretches if s.direction == d and s.edge is not None and s.from_reversal
+              and not (s.arrival is not None and d * (s.arrival.at - s.edge.at) > 0)]
         # a tendon is taken up from the no-load level, never from a load the other tendon still
         # holds (the current then starts below it, in loading-positive terms): that kink is the
         # hold ending, the other tendon unloading
@@ -561,9 +564,15 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         if not kept:
             # the stretch cut by the record's end, counted with the complete ones it must agree
             # with (design sweep 184: it alone read 8.2 deg where two complete ones read none,
-            # on a law with no backlash in its current)
+            # on a law with no backlash in its current); where a complete one could have shown
+            # it, a fall on the cut one is not enough, only a held plateau (3000175, pretensioned:
+            # a 28.9-deg "fall" on the cut stretch, none on the complete one before it, read with
+            # the twin's half-of-the-reversals rule as one of two)
+            complete = loaded_after
             kept = [s for i, s in enumerate(stretches) if shown(i, s)]
             loaded_after = loaded(len(stretches))
+            if complete and not any(s.plateau_held for s in kept):
+                kept = []
         pl = [s.plateau for s in kept]
         fit_se = [s.plateau_se for s in kept if s.plateau_se is not None]
         arr = np.array(pl)
