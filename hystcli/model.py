@@ -30,10 +30,10 @@ import numpy as np
 from .errors import ModelError
 
 PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
+"""The parameters of one knob in file order (DESIGN.md section 6)."""
 
 UNFIXABLE = ("d_pos", "d_neg", "b_pos", "b_neg")
 """Parameters an identification may leave unfixed (:attr:`KnobIdentification.unfixed`)."""
-"""The parameters of one knob in file order (DESIGN.md section 6)."""
 
 PAPER_OMEGA = 1.45
 """The paper's average slope omega (section III: "We used omega as 1.45 as the average value")."""
@@ -664,7 +664,8 @@ class Model:
                     f"cannot {what} with this model: knob {k}'s {' and '.join(unfixed)} "
                     f"{'were' if len(unfixed) > 1 else 'was'} not fixed by its sweep (the motor current "
                     "unloads at once after a reversal, so it does not show the backlash), and the model keeps "
-                    f"0 deg in their place; identify knob {k} with the tip angle measured. detect-shift can "
+                    f"0 deg in {'their' if len(unfixed) > 1 else 'its'} place; identify knob {k} with the tip "
+                    "angle measured. detect-shift can "
                     "still use this model")
 
     def knob(self, k: int) -> KnobModel:
