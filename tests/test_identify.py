@@ -964,3 +964,16 @@ def test_current_only_a_kink_before_its_own_stretchs_arrival_is_no_loading_edge(
     case = plants.sweep_case(3000219, tip=False)
     with pytest.raises(IdentificationError, match="never clearly shows the positive tendon taken up"):
         identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
+def test_current_only_refuses_a_dead_zone_narrower_than_its_edges_can_tell():
+    # independent plant (3100394, a drop law with a steep pretension, 4.6 mA/deg in a 13.5-deg dead
+    # zone, two cycles of +-10 deg at 70 deg/s; looked at after the 3100000 range's figures): the
+    # kink where the negative tendon's unloading ended was read as d_pos, 0.25 deg from d_neg,
+    # and returned 12.5 deg off. A dead zone that narrow cannot tell the two kinks apart: refused
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(3100394, tip=False)
+    with pytest.raises(IdentificationError, match=r"leave a dead zone of 0\.\d\d deg .* narrower than"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)

@@ -361,6 +361,15 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))
 
 
+NARROWEST_DEAD_ZONE = 1.0
+"""A current-only dead zone narrower than this (deg), or than twice its two edges' standard errors
+added, is refused: a kink where one tendon is taken up and one where the other's unloading ends
+look alike in the current, and at that width either may be the other (design sweep 3100394, a
+steeply pretensioned dead zone 13.5 deg wide, read 0.25 deg: the unloading's end taken for
+d_pos, 12.5 deg off; 3000219, 0.8 deg for 8.9, a held load's end; on design sweeps 0-999,
+3000000 and 3100000 the narrowest right reading was 1.39 deg, the zoo's narrowest dead zone 2)."""
+
+
 def _heights_assumed(d_pos: float, d_neg: float, b_pos: float, b_neg: float,
                      omega: float) -> tuple[float, float]:
     """Dead-zone heights when no tip angle was measured (see :func:`identify`)."""
@@ -389,6 +398,13 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
         raise IdentificationError(
             f"{where_k}: the current's edges cross (positive tendon taken up at {d_pos:.2f} deg, negative "
             f"at {d_neg:.2f} deg): no dead zone to identify")
+    narrow = max(NARROWEST_DEAD_ZONE, 2.0 * (reading.edges_se["pos"] + reading.edges_se["neg"]))
+    if d_pos - d_neg < narrow:
+        raise IdentificationError(
+            f"{where_k}: the current's edges leave a dead zone of {d_pos - d_neg:.2f} deg (positive tendon taken "
+            f"up at {d_pos:.2f} deg, negative at {d_neg:.2f} deg), narrower than {narrow:.2f} deg: there one "
+            "tendon taken up and the other's unloading ending look alike in the current, so either kink may be "
+            "the other; record the tip angle")
     # a side whose plateau the current does not show keeps 0 deg, unclaimed (no uncertainty, and
     # listed as unfixed): the caller says so, and predict/compensate refuse the model
     b_pos, b_neg = max(reading.backlash.get("pos", 0.0), 0.0), max(reading.backlash.get("neg", 0.0), 0.0)
