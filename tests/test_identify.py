@@ -930,10 +930,10 @@ def test_current_only_a_corner_piece_at_the_edge_is_no_loaded_run_before_a_wall(
     # piece of its own between the flat and the loaded slope (312: 1.8-2.1 mA/deg before 10.5);
     # read as the loaded run, with the loaded slope after it for a wall, it left the kink too few
     # points: 312's stretches down read no edge, 992's up read none on two and 0.43 deg early on
-    # the third. A wall ends the loaded run only after WALL_AFTER deg of it: every stretch through
+    # the third. A wall ends the loaded run only after WALL_MIN_RUN deg of it: every stretch through
     # each edge now reads it, and both edges are claimed within 0.2 deg
     case, fit = _zoo_current_fit(seed)
-    assert case.family == "stretch" and IC.WALL_AFTER == 3.0
+    assert case.family == "stretch" and IC.WALL_MIN_RUN == 3.0
     for side, d in (("pos", 1), ("neg", -1)):
         through = [s for s in fit.current.stretches if s.direction == d and s.from_reversal]
         assert through and all(s.edge is not None for s in through[:2]), (side, [s.edge for s in through])

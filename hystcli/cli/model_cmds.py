@@ -88,15 +88,20 @@ def identify_cmd(
     info(f"wrote {output}" + (f" and {plot}" if plot is not None else ""), quiet)
 
 
+def _ident(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification -> KnobIdentification or None
+    """What identify learnt of this knob's current, or None (a sweep without one)."""
+    return result.model.identification.get(knob) if result.model.identification else None
+
+
 def _ripple(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification -> current.Ripple or None
     """The cogging ripple identify read on this knob's current, or None."""
-    ident = result.model.identification.get(knob) if result.model.identification else None
+    ident = _ident(result, knob)
     return None if ident is None else ident.ripple
 
 
 def _unfixed(result, knob: int) -> tuple[str, ...]:  # noqa: ANN001 - identify.Identification
     """The parameters identify left unfixed on this knob (kept in the model without an uncertainty)."""
-    ident = result.model.identification.get(knob) if result.model.identification else None
+    ident = _ident(result, knob)
     return () if ident is None else ident.unfixed
 
 

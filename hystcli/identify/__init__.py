@@ -354,8 +354,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     if c is not None:
         ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
                         tuple(fit.sliding) + tuple(ambiguous_edges) if fit is not None
-                        else tuple(f"d_{s}" for s in reading.first_only)
-                        + tuple(f"b_{s}" for s in ("pos", "neg") if s not in reading.backlash))
+                        else tuple(f"d_{s}" for s in reading.first_only) + tuple(unshown))
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))

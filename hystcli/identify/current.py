@@ -38,7 +38,7 @@ UNLOAD_LEVEL = 5.0
 """A loading edge read this many current-noise sigmas on the far side of the no-load level (the
 other tendon's load) is a held load starting to unload, not an edge."""
 
-WALL_AFTER = 3.0
+WALL_MIN_RUN = 3.0
 """Knob travel (deg) of loaded run after a loading edge before a steeper piece counts as a wall
 that ends it (:func:`hystcli.current.loading_edge`'s ``min_run``). The corner at the edge can
 make a short piece of its own, between the flat and the loaded slope, and it was taken for the
@@ -224,7 +224,7 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     minlen = max(2, int(round(0.5 / width)))
     sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
     kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0,
-                        min_run=int(round(WALL_AFTER / width)))
+                        min_run=int(round(WALL_MIN_RUN / width)))
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
     plateau, held, plateau_se = None, False, None
