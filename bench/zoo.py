@@ -27,10 +27,12 @@ What counts, per case:
 * **detect-shift** (replays): *within 0.5 deg* of the plant's true shift, *0.5-2 deg*, or a *silent
   failure* (exit 0, more than 2 deg off); refusals are split by whether the edge the search has
   to find lies within its travel limit and the replay (*reach*, :func:`edge_reachable`: the
-  issue's denominator) or not; from a taut start whose far edge is out of reach, the edge of the
-  tendon it started on counts as reachable where the replay goes on until that tendon is slack
-  and then comes back across its edge (:func:`walk_back_reachable`: the search's walk back), and
-  the bench says how many cases only that makes reachable, so the rate without them can be read. A second rate keeps, of the reachable cases, those whose edge
+  issue's denominator) or not; where that edge is out of reach, another counts as reachable where
+  the search's walk back could read it (:func:`walk_back_reachable`): from a taut start the edge
+  of the tendon it started on, where the replay goes on until that tendon is slack and then comes
+  back across its edge; from a start in the dead zone the edge on its other side, where the
+  replay crosses it later. The bench says how many cases only that makes reachable (and how many
+  of them started slack), so the rate without them can be read. A second rate keeps, of the reachable cases, those whose edge
   *any* method could place: the plant's own noiseless replay, read the way the search reads,
   places the kink to +-0.25 deg at the Cramer-Rao bound (:func:`edge_placeable_se`), and the
   straight model has that edge (its identification did not leave it unplaced). Offsets returned
@@ -257,21 +259,28 @@ def edge_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> boo
 
 
 def walk_back_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -> bool:
-    """Whether a search from a taut start could read the edge of the tendon it started on, by
-    walking back to it from the dead zone (``hystcli.shift``'s walk back, taken when the far edge
-    is out of reach): the replay goes on away from that edge until the tendon is slack on any
-    current law (past the edge by the true backlash of that side, where the tip is back in the
-    dead zone) and 2.5 deg more (the readings that show it stays slack), within the travel limit,
-    and later comes back past the edge by 3 deg (to confirm it). False for a slack start."""
+    """Whether a search whose edge lies beyond reach could read another by walking back to it
+    (``hystcli.shift``'s walk back, taken when the edge it went for is out of reach).
+
+    From a taut start, the edge of the tendon it started on: the replay goes on away from that
+    edge until the tendon is slack on any current law (past the edge by the true backlash of that
+    side, where the tip is back in the dead zone) and 2.5 deg more (the readings that show it
+    stays slack), within the travel limit, and later comes back past the edge by 3 deg (to confirm
+    it). From a start in the dead zone, the edge on the other side of it from the one the record
+    goes to first: within the travel limit of the start (3 deg past it), and the replay goes 3 deg
+    past it at some time (after its turn)."""
     tr, o = case.truth, case.offset
     start = float(q[0])
     e_pos, e_neg = tr.d_pos + o, tr.d_neg + o
+    if e_neg < start < e_pos:
+        name, _, _, other = needed_edge(case, q)
+        side = -1 if name == "d_pos" else 1
+        far = other + 3.0 * side
+        return abs(far - start) <= travel and bool(np.any(side * (q - far) >= 0))
     if start >= e_pos:
         side, near, b = 1, e_pos, tr.b_pos
-    elif start <= e_neg:
-        side, near, b = -1, e_neg, tr.b_neg
     else:
-        return False
+        side, near, b = -1, e_neg, tr.b_neg
     slack = near - side * (b + 2.5)
     if abs(slack - start) > travel or abs(near + 3.0 * side - start) > travel:
         return False
@@ -408,6 +417,8 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
         reach = edge_reachable(case, q, travel)
         back_only = not reach and walk_back_reachable(case, q, travel)
         key = "reach" if reach or back_only else "beyond"
+        if back_only and case.truth.d_neg + case.offset < q[0] < case.truth.d_pos + case.offset:
+            unplaceable["back, slack"] += 1
         # whether the truth's readings could place the edge at all, and whether the model has it
         why_not = None
         if reach:
@@ -451,8 +462,9 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
         () if use_tip else ("identify refused",))
     print(f"\ndetect-shift on replays, {n} zoo plants from seed {seed} (the straight model identified on "
           f"the plant's straight sweep, {'tip fit' if use_tip else 'current only'}), {dt:.1f} s")
-    print("reach: the replay crosses the edge the search has to find within the travel limit, or (a taut "
-          "start) goes on until the tendon is slack and comes back across its edge; beyond: neither")
+    print("reach: the replay crosses the edge the search has to find within the travel limit, or the search "
+          "could read another on a walk back (a taut start: the replay goes on until the tendon is slack "
+          "and comes back across its edge; a slack start: it crosses the other edge later); beyond: neither")
     print(f"{'family':18s} " + " ".join(f"{c:>16s}" for c in cols))
     total: dict = defaultdict(int)
     for fam in sorted(stats):
@@ -467,8 +479,10 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
           f"cases whose edge is reachable or that returned an offset; silent failures (exit 0, error > 2 deg): "
           f"{total['silent > 2 deg']}; median |error| {np.median(errs) if errs else math.nan:.3f} deg, "
           f"worst {max(errs) if errs else math.nan:.2f}")
-    print(f"of those, reachable only on a walk back to the edge the search started beside (the far edge "
-          f"beyond reach): {unplaceable['back, ok'] + unplaceable['back, refused'] + unplaceable['back, off']}, "
+    print(f"of those, reachable only on a walk back (the edge it went for beyond reach): "
+          f"{unplaceable['back, ok'] + unplaceable['back, refused'] + unplaceable['back, off']} "
+          f"({unplaceable['back, slack']} of them from a start in the dead zone, to the edge on its other "
+          f"side; the rest from a taut start, to the edge it started beside), "
           f"{unplaceable['back, ok']} within 0.5 deg, {unplaceable['back, refused']} refused, "
           f"{unplaceable['back, off']} off by more")
     # the same rate over the reachable cases whose edge the readings could place at all (judged on

@@ -579,8 +579,9 @@ class ShiftResult:
     returned : bool
         The knob was returned to ``start`` after the search.
     walked_back : bool
-        The far edge lay beyond reach, and the offset came from the edge of the tendon the search
-        had left, read on the walk back to it from the dead zone.
+        The edge the search went for lay beyond reach, and the offset came from the one behind it,
+        read on the walk back: from a taut start, the edge of the tendon the search had left; from
+        a start in the dead zone, the edge on its other side.
     eps_lower, eps_upper, step : float
         The thresholds (mA/deg) and unit step (deg) used.
     evidence : Evidence or None
@@ -677,7 +678,7 @@ class _Search:
         self.contacts: list[float] = []
         self.start_outside = False
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
-        self.back: str | None = None  # why it turned back to the taut edge it had left (see _walk)
+        self.back: str | None = None  # why it turned back for the edge behind it (see _walk)
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
         self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
@@ -1242,7 +1243,9 @@ class _Search:
                      if self.start_outside else "")
             if self.back is not None:
                 where += (f", then, stopped there ({self.back}), turned back to read the edge it had "
-                          "left from the dead zone")
+                          "left from the dead zone" if self.start_outside else
+                          f", then, stopped there ({self.back}), turned back across the dead zone to read "
+                          "the edge on its other side")
             raise ShiftDetectionError(
                 f"knob {self.knob}: no edge found within {self.steps} steps / {self.travel:.1f} deg of knob "
                 f"travel ({lim.why}){where}{why}") from None
@@ -1262,11 +1265,19 @@ class _Search:
                     # start, whose few flat readings sat at the no-load level, is the evidence there is
                     self.dir = self.short[0]
                     return LOAD, self.short[1]
-                if self.back is None and self._released() and not self.contacts:
+                if self.back is None and not self.contacts and self._released() and (
+                        self.start_outside or self.dir * (self.q - self.start) >= self.backlash[self.dir] + 1.0):
                     # it left a taut tendon across the dead zone for the other edge, which lies
                     # beyond reach (the travel limit, or the end of a record): the edge it left is
                     # still there, and now it has the whole dead zone's flat before it. Turn back
-                    # once and load that tendon from the flat, as from a start in the dead zone
+                    # once and load that tendon from the flat, as from a start in the dead zone.
+                    # From a start in the dead zone, likewise: the edge the record went toward
+                    # first lies beyond reach, the one on the other side may not (design replay
+                    # 1598: the far edge 12.4 deg out with 11.6 of travel, the other 2.8 deg
+                    # behind the start). Only once the knob has gone further from the start than
+                    # the backlash of the tendon behind, and a degree: a start read as slack may
+                    # be that tendon taut with its load dropped at a reversal (a drop law), its
+                    # tip still on the plateau, which a walk back would take up where it turned
                     self.back = lim.why
                     self._reverse()
                     self.seg_back = True
@@ -1274,17 +1285,19 @@ class _Search:
                 raise
 
     def _released(self) -> bool:
-        """Whether the taut tendon the search turned from is slack by now: its current has come
+        """Whether the tendon the walk back would take up is slack by now: the current has come
         back to the no-load level (the band :meth:`_taut_side` reads) and stays there, no longer
         moving toward it, over the last :data:`AFTER_STEPS` readings (a degree or more).
 
-        Till then the tendon still carries load (its tip on the backlash plateau, or still
-        unloading), and a walk back takes it up again where the knob last turned, not at its
-        edge (design replay 932: still unloading 12 deg from where it turned, the kink 13 deg
-        past the edge; 76: a held load 21 deg long). Without a no-load level, never.
+        From a taut start it is the tendon the search turned from. Till then it still carries
+        load (its tip on the backlash plateau, or still unloading), and a walk back takes it up
+        again where the knob last turned, not at its edge (design replay 932: still unloading
+        12 deg from where it turned, the kink 13 deg past the edge; 76: a held load 21 deg long).
+        From a start in the dead zone it is the other tendon, which the search moved away from
+        all the way. Without a no-load level, never.
         """
         c0 = self.th.no_load(self.dir, self.moving)[0]
-        if not self.start_outside or c0 is None:
+        if c0 is None:
             return False
         if len(self.seg_q) < AFTER_STEPS or abs(self.seg_q[-1] - self.seg_q[-AFTER_STEPS]) < 1.0:
             return False
@@ -1294,11 +1307,27 @@ class _Search:
         # stays: not still moving toward the no-load level, as an unloading does through a wide
         # band (design replay 397, a wall plant: 11 mA over the last 1.5 deg, 100 mA short of the
         # no-load level, inside the sweep's band of +-132)
-        noise = _reading_noise(np.array(self.seg_c))
+        seg = np.array(self.seg_c)
+        noise = _reading_noise(seg)
         if not math.isfinite(noise):
             return False
+        # a current logged in whole steps (integer mA) that sits still has no spread of second
+        # differences at all: its step is its noise then (design replay 1346: 0.3 mA over 1.5 deg
+        # read as a current still moving)
+        steps = np.abs(np.diff(seg))
+        steps = steps[steps > 0]
+        if steps.size:
+            noise = max(noise, float(steps.min()) / math.sqrt(12.0))
+        # and a pretensioned dead zone climbs through the no-load level across its whole width at
+        # its own slope, which is no unloading (design replay 1063: 6 mA/deg, the sweep's 6.2),
+        # but only as far from that level as its swing: an unloading further off is no dead zone
+        # (design replay 397: 108 mA short of the level, a swing of 88, the sweep's slope 8.7
+        # mA/deg and the unloading's 7.5)
         change = _ls_slope(q, c) * (q[-1] - q[0])
-        return not (np.sign(change) == np.sign(c0 - float(np.mean(c))) and abs(change) > 3.0 * noise)
+        allowed = 3.0 * noise
+        if abs(c0 - float(np.mean(c))) <= self.th.dead_zone_swing + self.th.spread(self.moving) + allowed:
+            allowed += self.th.slope_dead_zone * abs(q[-1] - q[0])
+        return not (np.sign(change) == np.sign(c0 - float(np.mean(c))) and abs(change) > allowed)
 
     def _walk_on(self):  # noqa: ANN202 - (kind, Kink)
         """One leg of the walk: step, read the segment's kink, judge it; returns an accepted edge."""

@@ -279,10 +279,14 @@ def test_weak_evidence_is_refused_with_the_reason():
 
 
 def test_travel_and_step_limits_are_never_exceeded():
+    # no edge within 10 deg either side: out to the travel limit, back across the start toward
+    # the other edge (the walk back), stopped by the step limit (2 x 20 + 6) at the other side
     p = LawProbe(-40.0, 40.0)
-    with pytest.raises(ShiftDetectionError, match=r"no edge found within 20 steps / 10.0 deg.*travel limit"):
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within 46 steps / 23.0 deg.*step limit is 46.*"
+                                                  r"stopped there \(the travel limit is 10 deg.*turned back across"):
         detect_shift(LAW_MODEL, p, 1, max_travel=10.0)
     assert max(abs(m) for m in p.moves[:-1]) <= 10.0 and p.q == 0.0
+    assert len(p.moves) == 46 + 1                     # 46 steps, then the return
     p = LawProbe(-40.0, 40.0)
     with pytest.raises(ShiftDetectionError, match=r"within 7 steps.*step limit is 7"):
         detect_shift(LAW_MODEL, p, 1, max_steps=7)
@@ -294,12 +298,13 @@ def test_default_travel_limit_is_the_identification_sweeps_reach_and_half_the_de
     ident = KnobIdentification(0.5, 4.0, -35.0, 38.0, current_dead_zone=120.0)
     assert default_max_travel(Model({1: STRAIGHT}, identification={1: ident}), 1) == 45.0
     assert default_max_travel(Model({1: STRAIGHT}), 1) == DEFAULT_MAX_TRAVEL == 25.0
-    # a search with no edge inside stops at that limit: 45 / 0.5 = 90 steps
+    # a search with no edge inside stops at that limit (45 / 0.5 = 90 steps out), walks back
+    # across the start, and never goes past it on the other side either
     p = LawProbe(-60.0, 60.0)
     model = Model({1: STRAIGHT}, identification={1: ident})
-    with pytest.raises(ShiftDetectionError, match=r"no edge found within 90 steps / 45.0 deg"):
+    with pytest.raises(ShiftDetectionError, match=r"no edge found within 186 steps.*the travel limit is 45 deg"):
         detect_shift(model, p, 1)
-    assert max(abs(m) for m in p.moves[:-1]) <= 45.0
+    assert max(p.moves[:-1]) == 45.0 and min(p.moves[:-1]) >= -45.0
 
 
 def test_a_fault_stops_and_returns_the_knob_and_says_so():

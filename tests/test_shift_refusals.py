@@ -311,6 +311,33 @@ def test_an_unloading_tendon_that_stops_at_the_no_load_level_is_still_no_edge():
     assert r.edge_found_at == pytest.approx(2.0, abs=0.2)
 
 
+def test_a_search_from_the_dead_zone_whose_edge_is_out_of_reach_walks_back_to_the_other():
+    # dead zone [-3, 11] (the straight one shifted by +2), the knob resting at 0: the search goes
+    # up first, and the positive edge lies past its travel limit (11 deg + 3 to confirm, against
+    # 10). The negative edge lies 3 deg behind the start; the search turns back once across the
+    # dead zone's whole flat and reads it there (the old search refused every draw)
+    law = tendons(-3.0, 11.0)
+    for seed in range(4):
+        r = detect_shift(model(), Knob(law, seed=seed), 1, max_travel=10.0, max_steps=80)
+        assert r.edge == "neg" and r.walked_back and not r.start_outside, seed
+        assert r.edge_found_at == pytest.approx(-3.0, abs=0.2), seed
+        assert r.offset == pytest.approx(2.0, abs=0.2), seed
+
+
+def test_a_pretensioned_dead_zone_climbing_toward_the_no_load_level_is_no_tendon_still_unloading():
+    # dead zone [2, 16] (shift +7) with a pretension of 3 mA/deg across it, the negative tendon
+    # taut where the knob rests (-3): the search crosses toward the positive edge, beyond its
+    # travel limit of 9 deg, and stops at 6, where the dead zone's current climbs toward the
+    # no-load level (126 mA at the middle, 9) at its own slope. That is no unloading: the tendon
+    # behind is slack, and the walk back reads its edge at 2 (the old search refused every draw)
+    law = tendons(2.0, 16.0, k=12.0, pre=3.0)
+    m = model(slope_dead_zone=3.0, slope_loaded=15.0)
+    for seed in range(4):
+        r = detect_shift(m, Knob(law, start=-3.0, seed=seed), 1, max_travel=9.0)
+        assert r.start_outside and r.walked_back and r.edge == "neg", seed
+        assert r.offset == pytest.approx(7.0, abs=0.2), seed
+
+
 # --------------------------------------------------------------------------------------------
 # a tendon's backlash plateau
 # --------------------------------------------------------------------------------------------

@@ -181,6 +181,37 @@ def test_a_search_stopped_across_the_dead_zone_walks_back_to_the_edge_it_left(se
     assert r.edge == ("pos" if seed == 1281 else "neg")
 
 
+@pytest.mark.parametrize("seed", [1063, 1346, 1831])
+def test_a_tendon_gone_slack_is_walked_back_to_whatever_the_dead_zones_current_does(seed):
+    # design replays from a taut start whose far edge lies beyond reach, and whose tendon behind
+    # had gone slack where the search stopped. Stop 26's code took the current as still moving
+    # toward its no-load level and refused: 1063's pretensioned dead zone climbs at its own
+    # 6 mA/deg (the sweep's 6.2) through that level; 1346 and 1831 log the current in whole mA,
+    # so a flat's noise read as none and a 0.3 mA wobble as a current still unloading
+    r = _right_or_refused(seed)
+    assert r is not None and r.start_outside and r.walked_back
+
+
+@pytest.mark.parametrize("seed", [1570, 1598])
+def test_a_search_from_the_dead_zone_walks_back_across_it_when_its_edge_is_out_of_reach(seed):
+    # design replays that start in the dead zone and go first toward an edge past the travel
+    # limit (1598: 12.4 deg out, 11.6 of travel); the other edge lies behind the start (2.8 deg).
+    # Stop 26's code refused; the search now turns back once across the whole flat to it
+    r = _right_or_refused(seed)
+    assert r is not None and not r.start_outside and r.walked_back
+
+
+def test_an_unloading_further_off_the_no_load_level_than_the_dead_zone_swings_is_not_slack():
+    # design replay 397 (a wall plant, the far edge out of reach): where the search stops, the
+    # tendon behind still unloads at 7.5 mA/deg, 108 mA short of the no-load level. The sweep's
+    # dead-zone slope (8.7) would pass that as a pretensioned dead zone's, but a dead zone swings
+    # only 88 mA either side of the level: it is still the unloading, and a walk back would have
+    # taken the tendon up where the knob turned (19.14 deg against a true shift of 24.66)
+    case, detect = _detect(397)
+    with pytest.raises(ShiftDetectionError, match="no edge found"):
+        detect()
+
+
 @pytest.mark.parametrize("seed", [76, 932])
 def test_a_walk_back_to_a_tendon_still_loaded_is_refused(seed):
     # the tendon the search left had not gone slack where the record ends: 932 (a tip-load

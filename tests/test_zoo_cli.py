@@ -79,21 +79,28 @@ def test_detect_shift_on_independent_replays(tmp_path):
     assert ok >= 11
 
 
-def test_detect_shift_says_when_its_offset_came_from_a_walk_back(tmp_path):
+@pytest.mark.parametrize("seed, taut, note, edge", [
     # design replay 1802: the negative tendon taut at the start, the positive edge out of the
     # record's reach; the offset comes from the negative edge, read on the walk back
-    case = plants.replay_case(1802)
+    (1802, True, "crossed the dead zone, the far edge out of reach: walked back to the edge it left", "neg"),
+    # design replay 1598: the knob rests in the dead zone, the record goes first toward the
+    # negative edge, 12.4 deg out against 11.6 deg of travel; the positive edge lies 2.8 deg
+    # behind the start, read on the walk back across the dead zone
+    (1598, False, "the edge it went for out of reach: walked back across the dead zone to the other", "pos"),
+])
+def test_detect_shift_says_when_its_offset_came_from_a_walk_back(tmp_path, seed, taut, note, edge):
+    case = plants.replay_case(seed)
     model, _ = straight_model(case)
     mp, rep = tmp_path / "model.json", tmp_path / "replay.csv"
     save_model(mp, model)
     rep.write_text(case.replay.csv_text())
     res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(rep), "-o", str(tmp_path / "a.json")])
     assert res.exit_code == 0, res.output
-    assert "crossed the dead zone, the far edge out of reach: walked back to the edge it left" in res.stdout
+    assert note in " ".join(res.stdout.split())
     res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--replay", str(rep), "-o", str(tmp_path / "b.json"),
                               "--format", "json", "-q"])
     got = json.loads(res.stdout)["knobs"]["1"]
-    assert got["walked_back"] is True and got["start_outside"] is True and got["edge"] == "neg"
+    assert got["walked_back"] is True and got["start_outside"] is taut and got["edge"] == edge
     assert abs(got["offset"] - case.offset) <= 0.5
 
 

@@ -63,6 +63,8 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
         if r.start_outside:
             notes.append("started with a tendon taut: crossed the dead zone"
                          + (", the far edge out of reach: walked back to the edge it left" if r.walked_back else ""))
+        elif r.walked_back:
+            notes.append("the edge it went for out of reach: walked back across the dead zone to the other")
         if r.contacts:
             notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
