@@ -226,6 +226,11 @@ def bench_identify(n: int, seed: int, use_tip: bool) -> None:
               "plateau' where every refused backlash is narrower than 1 deg")
 
 
+def starts_slack(case: plants.ReplayCase, q: np.ndarray) -> bool:
+    """Whether the replay starts with the knob inside the plant's true (shifted) dead zone."""
+    return case.truth.d_neg + case.offset < float(q[0]) < case.truth.d_pos + case.offset
+
+
 def needed_edge(case: plants.ReplayCase, q: np.ndarray) -> tuple[str, float, float, float]:
     """The edge the search has to find, from the true state at the replay's start.
 
@@ -239,7 +244,7 @@ def needed_edge(case: plants.ReplayCase, q: np.ndarray) -> tuple[str, float, flo
     e_pos, e_neg = tr.d_pos + o, tr.d_neg + o
     moves = np.flatnonzero(np.abs(q - start) > 1e-9)
     first = int(np.sign(q[moves[0]] - start)) if moves.size else 1
-    if e_neg < start < e_pos:                      # slack: the way the record goes first
+    if starts_slack(case, q):                      # slack: the way the record goes first
         return ("d_pos", e_pos, start, e_neg) if first > 0 else ("d_neg", e_neg, start, e_pos)
     if start >= e_pos:                             # taut: through the dead zone to the other edge
         return "d_neg", e_neg, e_pos, e_pos
@@ -272,7 +277,7 @@ def walk_back_reachable(case: plants.ReplayCase, q: np.ndarray, travel: float) -
     tr, o = case.truth, case.offset
     start = float(q[0])
     e_pos, e_neg = tr.d_pos + o, tr.d_neg + o
-    if e_neg < start < e_pos:
+    if starts_slack(case, q):
         name, _, _, other = needed_edge(case, q)
         side = -1 if name == "d_pos" else 1
         far = other + 3.0 * side
@@ -417,7 +422,7 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
         reach = edge_reachable(case, q, travel)
         back_only = not reach and walk_back_reachable(case, q, travel)
         key = "reach" if reach or back_only else "beyond"
-        if back_only and case.truth.d_neg + case.offset < q[0] < case.truth.d_pos + case.offset:
+        if back_only and starts_slack(case, q):
             unplaceable["back, slack"] += 1
         # whether the truth's readings could place the edge at all, and whether the model has it
         why_not = None

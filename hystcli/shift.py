@@ -1242,10 +1242,9 @@ class _Search:
                      " (it started with a tendon taut and went through the dead zone toward the other edge)"
                      if self.start_outside else "")
             if self.back is not None:
-                where += (f", then, stopped there ({self.back}), turned back to read the edge it had "
-                          "left from the dead zone" if self.start_outside else
-                          f", then, stopped there ({self.back}), turned back across the dead zone to read "
-                          "the edge on its other side")
+                where += (f", then, stopped there ({self.back}), "
+                          + ("turned back to read the edge it had left from the dead zone" if self.start_outside
+                             else "turned back across the dead zone to read the edge on its other side"))
             raise ShiftDetectionError(
                 f"knob {self.knob}: no edge found within {self.steps} steps / {self.travel:.1f} deg of knob "
                 f"travel ({lim.why}){where}{why}") from None
@@ -1324,10 +1323,11 @@ class _Search:
         # (design replay 397: 108 mA short of the level, a swing of 88, the sweep's slope 8.7
         # mA/deg and the unloading's 7.5)
         change = _ls_slope(q, c) * (q[-1] - q[0])
+        short = c0 - float(np.mean(c))
         allowed = 3.0 * noise
-        if abs(c0 - float(np.mean(c))) <= self.th.dead_zone_swing + self.th.spread(self.moving) + allowed:
+        if abs(short) <= self.th.dead_zone_swing + self.th.spread(self.moving) + allowed:
             allowed += self.th.slope_dead_zone * abs(q[-1] - q[0])
-        return not (np.sign(change) == np.sign(c0 - float(np.mean(c))) and abs(change) > allowed)
+        return not (np.sign(change) == np.sign(short) and abs(change) > allowed)
 
     def _walk_on(self):  # noqa: ANN202 - (kind, Kink)
         """One leg of the walk: step, read the segment's kink, judge it; returns an accepted edge."""
