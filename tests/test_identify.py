@@ -977,3 +977,40 @@ def test_current_only_refuses_a_dead_zone_narrower_than_its_edges_can_tell():
     case = plants.sweep_case(3100394, tip=False)
     with pytest.raises(IdentificationError, match=r"leave a dead zone of 0\.\d\d deg .* narrower than"):
         identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
+@pytest.mark.parametrize("seed,name", [
+    # independent plants whose current carries no backlash, with a pretensioned (tilted) dead zone,
+    # design seeds looked at for this rule: after the top reversal the current fell straight back
+    # to the dead zone, and the segmentation took that fall for the sheath friction flipping over a
+    # backlash, with the dead zone's tilt as the "unloading" (before: b_pos 8.02 / 13.06 / 5.21
+    # returned, 7.3, 12.1 and 2.7 deg off the true loop's backlash, exit 0)
+    (199, "b_pos"), (1411, "b_pos"), (2017, "b_pos"),
+])
+def test_current_only_a_fall_into_a_tilted_dead_zone_is_no_backlash(seed, name):
+    # a flip over the backlash is followed by the tendon unloading, clearly steeper than the dead
+    # zone; an "unloading" no steeper than the dead zone is the dead zone itself
+    case, fit = _zoo_current_fit(seed)
+    assert not case.current_shows_backlash
+    _assert_backlash_unfixed(fit, case.truth, name)
+
+
+def test_current_only_a_kink_with_a_tenth_of_the_records_loaded_slope_is_no_edge():
+    # independent plant (design seed 2863, a stretch law, two cycles of +-8.6 deg): the only
+    # positive kink left after the level rules sat on the stretch cut by the record's end, 0.1
+    # mA/deg after it against 3.4 to 6.7 on the record's other take-ups; returned as d_pos, 2.5 deg
+    # off at exit 0. A tendon loads the motor at its stiffness on every take-up: refused instead
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(2863, tip=False)
+    with pytest.raises(IdentificationError, match="never clearly shows the positive tendon taken up"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
+def test_current_only_a_weak_kink_does_not_outvote_the_edge():
+    # independent plant (design seed 2594, spiky): one stretch read a kink 16 deg off the negative
+    # edge with a loaded slope of 0.03 mA/deg (the record's take-ups: 4 to 10); with it among the
+    # readings the edge was refused. Left out, d_neg is read within a degree
+    case, fit = _zoo_current_fit(2594)
+    _assert_within(fit, case.truth, ("d_pos", "d_neg"))
