@@ -428,6 +428,10 @@ def test_no_wall_on_a_free_loop_or_a_dead_zone_flat():
     # steeply after the reversal, which is not the sheath friction flipping over the backlash
     # (before: b_pos 17.0 and 24.5 returned against a true 5.7 and 8.3)
     (45, "wall", "b_pos"), (371, "wall", "b_pos"),
+    # the same wall after the record's first stretch, too short to read its end slope: the other
+    # stretches that turned at the same knob angle met the same wall there (before: b_pos 9.46
+    # returned on a stretch law whose current carries no backlash, 5.2 deg off the true loop's)
+    (826, "wall", "b_pos"),
     # a current that follows the tendon's stretch carries no backlash; a plateau-like piece after
     # fewer than half of the loaded reversals is not one (before: b_neg 5.97 returned against
     # 2.44; b_pos now shows after one of three reversals, and the reading stops there)

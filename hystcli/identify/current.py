@@ -66,7 +66,11 @@ END_TRAVEL = 2.0
 ELASTIC_TOP = 2.0
 """An end slope this many times the loaded slope at the edge: the load rose elastically steeper
 at the top of the stroke (a wall, a stiffening cable), so a steep fall after the reversal is that
-load coming back, not the sheath friction flipping over the backlash."""
+load coming back, not the sheath friction flipping over the backlash. A stretch whose end slope
+is not read (the record's first, too short or slow) takes the median of the stretches that
+turned within a degree of the same knob angle: the same wall (design sweep 826: b_pos 9.46 read
+on a stretch law, 5.2 deg off; design sweeps 0-2999, current only: that record right, nothing
+else changed)."""
 
 DEAD_SHARE = 0.2
 """A "dead zone" before a loading edge that climbs at this share of the loaded slope after it or more
@@ -283,7 +287,7 @@ that, b 1.2 to 12.1 deg off at exit 0). Design sweeps 0-2999, current only, per 
 silent failures right, the wrong backlash of 1945 and 2657 (walls) no longer claimed, nothing
 else changed; the twin's sheath flip (its unloading at the loaded slope, its dead zone flat) is
 untouched (test_current_only_recovers_edges_and_backlash). A wall's elastic fall back is not
-this: 826 still reads one (:data:`ELASTIC_TOP`)."""
+this (:data:`ELASTIC_TOP`)."""
 
 FLIP = 2.0
 """A fall at least this many times the unloading slope over the backlash is the sheath friction
@@ -586,8 +590,17 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             # against the loaded slope the stretches from a reversal read at their edges (the
             # record's first stretch may have taken the wall's own steep rise for its edge)
             ref = loaded_ref if math.isfinite(loaded_ref) else (prev.loaded_slope if prev is not None else None)
-            elastic = (prev is not None and prev.end_slope is not None and ref is not None
-                       and d * prev.end_slope >= ELASTIC_TOP * max(ref, 1e-12))
+            end = None
+            if prev is not None:
+                end = prev.end_slope
+                if end is None:
+                    # a stretch too short or slow to read its end: the other stretches that
+                    # turned within a degree of the same knob angle met the same wall there
+                    top = float(q[prev.stop])
+                    same = [o.end_slope for o in stretches if o.direction == prev.direction
+                            and o.end_slope is not None and abs(float(q[o.stop]) - top) <= 1.0]
+                    end = float(np.median(same)) if same else None
+            elastic = (end is not None and ref is not None and d * end >= ELASTIC_TOP * max(ref, 1e-12))
             return s.plateau_held or not elastic
 
         kept = [s for i, s in enumerate(stretches[:-1]) if shown(i, s)]
