@@ -523,6 +523,18 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         others = [a for j, a in ups if j != i]
         if s.edge is not None and others and s.edge.after < LOADED_SHARE * float(np.median(others)):
             weak.add(i)
+    # each stretch's end slope (what the load did just before the next reversal); a stretch too
+    # short or slow to read its own takes the median of the stretches that turned within a
+    # degree of the same knob angle, which met the same wall there
+    end_slopes: list[float | None] = []
+    for s in stretches:
+        end = s.end_slope
+        if end is None:
+            top = float(q[s.stop])
+            same = [o.end_slope for o in stretches if o.direction == s.direction
+                    and o.end_slope is not None and abs(float(q[o.stop]) - top) <= 1.0]
+            end = float(np.median(same)) if same else None
+        end_slopes.append(end)
     for side, d in (("pos", +1), ("neg", -1)):
         # stretches that came through the whole dead zone from a reversal first: the record's
         # first stretch starts wherever the knob rested
@@ -590,16 +602,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             # against the loaded slope the stretches from a reversal read at their edges (the
             # record's first stretch may have taken the wall's own steep rise for its edge)
             ref = loaded_ref if math.isfinite(loaded_ref) else (prev.loaded_slope if prev is not None else None)
-            end = None
-            if prev is not None:
-                end = prev.end_slope
-                if end is None:
-                    # a stretch too short or slow to read its end: the other stretches that
-                    # turned within a degree of the same knob angle met the same wall there
-                    top = float(q[prev.stop])
-                    same = [o.end_slope for o in stretches if o.direction == prev.direction
-                            and o.end_slope is not None and abs(float(q[o.stop]) - top) <= 1.0]
-                    end = float(np.median(same)) if same else None
+            end = end_slopes[i - 1] if i > 0 else None
             elastic = (end is not None and ref is not None and d * end >= ELASTIC_TOP * max(ref, 1e-12))
             return s.plateau_held or not elastic
 
