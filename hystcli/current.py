@@ -95,7 +95,18 @@ explain before it is taken for one: less, and the wave is more likely the flat's
 (a pretensioned curve, a backlash load) than the motor's cogging."""
 
 RIPPLE_PERIODS = 1.5
-"""Fewest periods of a ripple the dead-zone samples must span."""
+"""Fewest periods of a ripple the dead-zone samples must span at :data:`RIPPLE_EXPLAINED`."""
+
+RIPPLE_STRONG = 0.9
+"""Share of the variance a ripple must explain when the evidence is thin in another way: the
+samples span fewer than :data:`RIPPLE_PERIODS` periods (but at least one), or they were all read
+moving one way, so that the two directions cannot be compared. On design sweeps 0-1999 of
+bench/zoo.py such ripples explained 0.92-0.995 of the flat (a cogging period of 4.9 deg over a
+6.8-deg dead zone, 1871; flats read only rising or only falling, 258, 351, 893), where the waves
+taken for a ripple on plants that had none explained 0.5-0.8."""
+
+RIPPLE_ONE_WAY_PERIODS = 2.0
+"""Fewest periods of a ripple the samples must span when they were all read moving one way."""
 
 RIPPLE_SHORTEST = 1.0
 """Shortest ripple period searched (deg of knob): twice a search's default step. A shorter wave
@@ -153,11 +164,14 @@ def cogging_ripple(q: np.ndarray, c: np.ndarray, group: np.ndarray, *, max_point
     ``q, c`` are samples on the dead zone's flat; ``group`` labels each with the direction of
     motion (0/1), which sets the motor's Coulomb level. The fit is a level per group, one slope
     (a pretensioned dead zone) and a sinusoid in ``q``, its period searched on a log grid from
-    :data:`RIPPLE_SHORTEST` (or four samples' spacing) to the span over :data:`RIPPLE_PERIODS`. The ripple is taken
-    only when it explains :data:`RIPPLE_EXPLAINED` of the variance about the levels and slope,
+    :data:`RIPPLE_SHORTEST` (or four samples' spacing) to the span. The ripple is taken only
+    when it explains :data:`RIPPLE_EXPLAINED` of the variance about the levels and slope,
     and when each direction, fitted alone at that period, shows it with the same phase (within
     45 deg) and amplitude (within a factor of 2): cogging is set by where the motor shaft is, not
     by which way it turns, where a wave from the tendons' loads would not hold still like that.
+    Thinner evidence needs a clearer wave (:data:`RIPPLE_STRONG`): a period between one and
+    :data:`RIPPLE_PERIODS` times the span, or samples read moving one way only (then over at
+    least :data:`RIPPLE_ONE_WAY_PERIODS` periods, with no second direction to compare).
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -166,14 +180,18 @@ def cogging_ripple(q: np.ndarray, c: np.ndarray, group: np.ndarray, *, max_point
         keep = np.linspace(0, q.size - 1, max_points).round().astype(int)
         q, c, g = q[keep], c[keep], g[keep]
     labels = [v for v in (0, 1) if np.sum(g == v) >= 20]
-    if len(labels) < 2 or q.size < 60:
+    keep = np.isin(g, labels)
+    q, c, g = q[keep], c[keep], g[keep]
+    if not labels or q.size < 60:
         return None
+    one_way = len(labels) < 2
     span = float(np.ptp(q))
     dx = np.diff(np.sort(q))
     dx = dx[dx > 0]
     if dx.size == 0 or span <= 0:
         return None
-    lo, hi = max(4.0 * float(np.median(dx)), RIPPLE_SHORTEST), span / RIPPLE_PERIODS
+    lo, hi = max(4.0 * float(np.median(dx)), RIPPLE_SHORTEST), span / (RIPPLE_ONE_WAY_PERIODS if one_way
+                                                                        else RIPPLE_PERIODS)
     if not hi > lo:
         return None
     base = np.column_stack([(g == v).astype(float) for v in labels] + [q - float(q.mean())])
@@ -181,6 +199,11 @@ def cogging_ripple(q: np.ndarray, c: np.ndarray, group: np.ndarray, *, max_point
     if not rss0 > 0:
         return None
     grid = np.geomspace(lo, hi, n_periods)
+    if not one_way:
+        # on to one period over the span, at the grid's own spacing (the grid below is kept as it
+        # is, so that a ripple read on it is read the same)
+        ratio = float(grid[1] / grid[0]) if grid.size > 1 else 2.0
+        grid = np.concatenate([grid, hi * ratio ** np.arange(1, math.floor(math.log(span / hi) / math.log(ratio)) + 1)])
     rss = np.array([_ripple_rss(q, c, base, p)[0] for p in grid])
     i = int(np.argmin(rss))
     if i in (0, grid.size - 1):
@@ -190,11 +213,12 @@ def cogging_ripple(q: np.ndarray, c: np.ndarray, group: np.ndarray, *, max_point
     fr = np.array([_ripple_rss(q, c, base, p)[0] for p in fine])
     period = float(fine[int(np.argmin(fr))])
     rss1, coef = _ripple_rss(q, c, base, period)
-    if (rss0 - rss1) / rss0 < RIPPLE_EXPLAINED:
+    thin = one_way or span / period < RIPPLE_PERIODS
+    if (rss0 - rss1) / rss0 < (RIPPLE_STRONG if thin else RIPPLE_EXPLAINED):
         return None
     a_sin, a_cos = float(coef[-2]), float(coef[-1])
     amp = math.hypot(a_sin, a_cos)
-    for v in labels:
+    for v in labels if not one_way else ():
         m = g == v
         _, cv = _ripple_rss(q[m], c[m], np.column_stack([np.ones(int(m.sum())), q[m] - float(q[m].mean())]), period)
         s_v, c_v = float(cv[-2]), float(cv[-1])

@@ -127,6 +127,29 @@ def test_identify_reports_the_motors_cogging_where_the_sweep_shows_it(tmp_path):
         assert got["period"] == pytest.approx(ripple.period) and got["amplitude"] == pytest.approx(ripple.amplitude)
 
 
+@pytest.mark.parametrize("seed", [1871, 912])
+def test_a_ripple_over_a_narrow_dead_zone_is_read_and_the_shift_found_through_it(tmp_path, seed):
+    # design replays of coulomb-viscous plants whose straight sweep's flat spans fewer than 1.5
+    # periods of the motor's cogging: 1871 (2.9 mA every 4.9 deg over 6.8 deg; no shift) and 912
+    # (2.8 mA every 4.6 deg over 6.3 deg). Before such ripples were read, detect-shift bent its
+    # kink on them: 1871's null came back -1.14 deg at exit 0 (912: 0.20 deg off; now 0.06)
+    case = plants.replay_case(seed)
+    assert case.family == "coulomb-viscous" and case.factors["sweep"]["ripple_amp"] > 1.0
+    sweep, rep, out = tmp_path / "s.csv", tmp_path / "r.csv", tmp_path / "m.json"
+    sweep.write_text(case.straight_sweep.csv_text())
+    rep.write_text(case.replay.csv_text())
+    res = runner.invoke(app, ["identify", str(sweep), "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    ripple = load_model(out).identification[1].ripple
+    assert ripple is not None
+    assert ripple.period == pytest.approx(case.factors["sweep"]["ripple_period"], rel=0.05)
+    assert ripple.amplitude == pytest.approx(case.factors["sweep"]["ripple_amp"], rel=0.15)
+    res = runner.invoke(app, ["detect-shift", "--model", str(out), "--replay", str(rep), "-o", str(tmp_path / "b.json"),
+                              "--format", "json", "-q"])
+    assert res.exit_code == 0, res.output
+    assert abs(json.loads(res.stdout)["knobs"]["1"]["offset"] - case.offset) <= 0.5
+
+
 @pytest.mark.parametrize("seed", [3, 11])
 def test_current_only_model_without_backlash_detects_the_shift_and_refuses_to_predict(tmp_path, seed):
     # design replays whose straight sweep's current unloads at once after each reversal: identify
