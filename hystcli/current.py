@@ -346,9 +346,14 @@ def kink_fit(q: np.ndarray, c: np.ndarray, direction: int, *, lo: float | None =
     except np.linalg.LinAlgError:
         cov, se_s1 = None, math.inf
     # a sag clear of the noise (two standard errors) on a loaded stretch long enough to show one
-    # (ten points): no tendon's; on fewer the quadratic term is loose either way, and is kept
+    # (ten points): no tendon's; on fewer the quadratic term is loose either way, and is kept.
+    # c is fitted against x unsigned: moving down, the negative tendon's current falls (its
+    # loaded slope along x is negative), and it stiffens by falling faster still, so its sag is
+    # the quadratic term's sign turned by the direction (taken unturned, every stiffening
+    # negative tendon was fitted straight and its edge put late: design replays 1228, 0.92 deg
+    # off at exit 0, and 3400497, 1.5 deg)
     if (convex and curved and cov is not None and int(np.sum(dx1 >= 0)) >= 10
-            and b1[3] + 2.0 * math.sqrt(max(cov[3, 3], 0.0)) < 0):
+            and direction * b1[3] + 2.0 * math.sqrt(max(cov[3, 3], 0.0)) < 0):
         return kink_fit(q, c, direction, lo=lo, hi=hi, curved=False, min_side=min_side, resolution=resolution)
     # standard error of the kink from the SSE profile: where it rises by s2 above its minimum
     prof = sse - float(np.min(sse))
