@@ -140,8 +140,8 @@ def test_a_stiffening_cable_past_its_edge_is_not_taken_late():
 
 
 def test_a_kink_that_keeps_moving_on_with_the_loaded_stretch_is_no_edge():
-    # the rule itself, on a search's log (no design replay triggers it since the stiffening
-    # cable's kink keeps its curvature): a kink that passed every check ten readings ago at
+    # the rule itself, on a search's log (no stiffening plant's replay of 0-999 or 2200000-2200499
+    # triggers it since the stiffening cable's kink keeps its curvature): a kink that passed every check ten readings ago at
     # 11.0 deg, now at 11.8 deg (+-0.1) has moved on by more than MAX_OFFSET_SE and twice its
     # standard error: refused; at 11.1 deg it has held its place
     from hystcli.current import Kink
