@@ -512,13 +512,13 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     # both fell outside it: design seed 2005)
     lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
     c0 = float(np.median(lv)) if lv else math.nan
-    loaded_from_reversal = [s.loaded_slope for s in stretches if s.from_reversal and s.loaded_slope is not None]
-    loaded_ref = float(np.median(loaded_from_reversal)) if loaded_from_reversal else math.nan
+    # the loaded slope of each stretch from a reversal that read an edge (its kink's slope after)
+    ups = [(i, s.loaded_slope) for i, s in enumerate(stretches) if s.from_reversal and s.loaded_slope is not None]
+    loaded_ref = float(np.median([a for _, a in ups])) if ups else math.nan
     # a tendon taken up loads the motor at the tendon's stiffness, on every stretch that takes it
     # up: a kink whose loaded slope is a small share of what the record's other take-ups show is
     # no tendon taken up (the current's waviness, the tail of an unloading)
     weak = set()
-    ups = [(i, s.edge.after) for i, s in enumerate(stretches) if s.edge is not None and s.from_reversal]
     for i, s in enumerate(stretches):
         others = [a for j, a in ups if j != i]
         if s.edge is not None and others and s.edge.after < LOADED_SHARE * float(np.median(others)):
