@@ -1018,3 +1018,16 @@ def test_current_only_a_weak_kink_does_not_outvote_the_edge():
     # readings the edge was refused. Left out, d_neg is read within a degree
     case, fit = _zoo_current_fit(2594)
     _assert_within(fit, case.truth, ("d_pos", "d_neg"))
+
+
+def test_a_backlash_read_off_one_fall_of_two_is_not_claimed():
+    # zoo sweep 3500484: a pretensioned tendon whose current follows its stretch (no backlash in
+    # it), two cycles of +-13 deg. After one of the two top reversals the unloading's curvature at
+    # the turn (4.9 mA/deg over 2.3 deg, then 1.5) passed for the sheath friction flipping, and
+    # b_pos came back 2.77 deg, claimed, against a tip plateau of 10.1. A flip recurs after every
+    # loaded reversal; a fall after one of two is not read
+    case, fit = _zoo_current_fit(3500484)
+    assert case.factors["base"] == "stretch" and not case.current_shows_backlash
+    stretches = [s for s in fit.current.stretches if s.direction == -1 and s.from_reversal]
+    assert len(stretches) == 2 and sum(s.plateau is not None for s in stretches) == 1
+    _assert_backlash_unfixed(fit, case.truth, "b_pos")
