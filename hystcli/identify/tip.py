@@ -68,7 +68,8 @@ SEARCH_SAMPLES = 1200
 """Samples the global grid search scores each geometry on."""
 
 N_STARTS = 6
-"""Distinct grid points refined by the local optimiser."""
+"""Distinct grid points refined by the local optimiser (one batch; :func:`fit_tip`'s ``batches``
+adds the next-best ones)."""
 
 FLAT_SAMPLES = 2
 """Fewest samples the fitted loop must put on a dead-zone flat for its edge to count as fixed."""
@@ -523,7 +524,8 @@ class TipFit:
 
 
 def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
-            keep: np.ndarray | None = None, walls: tuple[float | None, float | None] = (None, None)) -> TipFit:
+            keep: np.ndarray | None = None, walls: tuple[float | None, float | None] = (None, None),
+            batches: int = 1) -> TipFit:
     """Fit the seven tip parameters to a record by output error.
 
     Parameters
@@ -538,6 +540,10 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
         ``(bottom, top)``: tip levels beyond which the measured tip is held by a wall
         (:func:`find_walls`); samples there are censored (the free loop only has to reach the
         wall), so the loop fitted is the free tip's.
+    batches : int
+        Most batches of :data:`N_STARTS` distinct grid points refined: after the first, each
+        batch takes the next-best ones, and the search stops at the first batch that finds no
+        better optimum than all before it.
 
     Returns
     -------
@@ -559,7 +565,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     sse = np.empty(cands.shape[0])
     zeros = np.zeros(qs.size)
     _batch_kernel(qs, ys, np.ones(qs.size) if free_s is None else free_s.astype(float), zeros, zeros, cands, sse)
-    best_geometries = _distinct_best(cands, sse, N_STARTS, span)
+    ranked = _distinct_best(cands, sse, N_STARTS * max(int(batches), 1), span)
+    best_geometries = ranked[:N_STARTS]
     if cs is not None:
         # at a wall, also the best candidates whose free loop reaches the wall where the tip sits
         # at it (the ranking above ignores those samples; on a coarse grid, ranking by their
@@ -586,6 +593,16 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
             res = _refine(th, qs, ys, f_scale, cens=cs)
             if best is None or res.cost < best.cost:
                 best = res
+        rest = ranked[N_STARTS:]
+        while rest:
+            batch, rest = rest[:N_STARTS], rest[N_STARTS:]
+            improved = False
+            for g in batch:
+                res = _refine(_start_from_geometry(g, qs, ys, free_s), qs, ys, f_scale, cens=cs)
+                if res.cost < best.cost * (1.0 - 1e-6):
+                    best, improved = res, True
+            if not improved:
+                break
         # a second pass with the scale of the winner's own residuals
         sd = _robust_sd(_residuals(best.x, qf, yf, cf))
         f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
