@@ -1074,3 +1074,20 @@ def test_a_backlash_read_off_one_fall_of_two_is_not_claimed():
     stretches = [s for s in fit.current.stretches if s.direction == -1 and s.from_reversal]
     assert len(stretches) == 2 and sum(s.plateau is not None for s in stretches) == 1
     _assert_backlash_unfixed(fit, case.truth, "b_pos")
+
+
+def test_a_kink_on_the_records_cut_last_stretch_does_not_outvote_the_first_stretch():
+    # zoo sweep 3600467 (a stiffening cable whose current follows its stretch): one cycle from
+    # -10.3 deg up to +18.2, down to -18.2, and up again to -10.5 where the record ends. That last
+    # stretch, cut 5.3 deg into the dead zone, showed a kink at -14.1 deg, the only edge read
+    # moving up from a reversal, and identify --current-only returned d_pos -14.1 with a standard
+    # error of 0.18 against a true +8.13 (the first stretch had it at +8.06). A cut stretch cannot
+    # show that no flat follows its kink; against the first stretch's edge, neither is trusted:
+    # the first stretch's edge is returned as an estimate, unclaimed
+    case, fit = _zoo_current_fit(3600467)
+    last = fit.current.stretches[-1]
+    assert last.direction == 1 and last.edge is not None and abs(last.edge.at - case.truth.d_pos) > 20
+    assert "d_pos" not in fit.stderr and "d_pos" in fit.ident.unfixed
+    assert any("only the record's first stretch shows the positive tendon" in w for w in fit.warnings)
+    assert abs(fit.model.d_pos - case.truth.d_pos) <= 0.5
+    _assert_within(fit, case.truth, ("d_neg",))

@@ -547,6 +547,18 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         # holds (the current then starts below it, in loading-positive terms): that kink is the
         # hold ending, the other tendon unloading
         ks = [k for k in ks if not d * (k.level - c0) < -UNLOAD_LEVEL * noise]
+        # the record's last stretch is cut by its end: a kink there cannot show that no flat
+        # follows it, as a tendon taken up must. Where it alone shows this side's edge and the
+        # record's first stretch shows it elsewhere, neither end of the record is known, and the
+        # first stretch's edge is read as the estimate it is (below: unclaimed, unused by
+        # Algorithm 1). Zoo sweeps 3600467 (a one-cycle sweep ending 7.7 deg into the dead
+        # zone: a kink there, 1.8 deg past the other tendon's arrival, read d_pos 22.2 deg off at
+        # exit 0, where the first stretch had it within 0.07) and 3500366 (d_neg 7.2 deg off)
+        cut = stretches[-1].edge if len(stretches) > 1 else None
+        first_edge = stretches[0].edge if stretches and stretches[0].direction == d and 0 not in weak else None
+        if (ks and cut is not None and all(k is cut for k in ks)
+                and first_edge is not None and abs(first_edge.at - cut.at) > 1.0):
+            ks = []
         if not ks:
             # the first stretch's edge only when no stretch from a reversal went past it and
             # failed to show it: the first starts from a state the current cannot tell (a tendon
