@@ -1063,19 +1063,6 @@ def test_current_only_a_weak_kink_does_not_outvote_the_edge():
     _assert_within(fit, case.truth, ("d_pos", "d_neg"))
 
 
-def test_a_backlash_read_off_one_fall_of_two_is_not_claimed():
-    # zoo sweep 3500484: a pretensioned tendon whose current follows its stretch (no backlash in
-    # it), two cycles of +-13 deg. After one of the two top reversals the unloading's curvature at
-    # the turn (4.9 mA/deg over 2.3 deg, then 1.5) passed for the sheath friction flipping, and
-    # b_pos came back 2.77 deg, claimed, against a tip plateau of 10.1. A flip recurs after every
-    # loaded reversal; a fall after one of two is not read
-    case, fit = _zoo_current_fit(3500484)
-    assert case.factors["base"] == "stretch" and not case.current_shows_backlash
-    stretches = [s for s in fit.current.stretches if s.direction == -1 and s.from_reversal]
-    assert len(stretches) == 2 and sum(s.plateau is not None for s in stretches) == 1
-    _assert_backlash_unfixed(fit, case.truth, "b_pos")
-
-
 def test_a_kink_on_the_records_cut_last_stretch_does_not_outvote_the_first_stretch():
     # zoo sweep 3600467 (a stiffening cable whose current follows its stretch): one cycle from
     # -10.3 deg up to +18.2, down to -18.2, and up again to -10.5 where the record ends. That last

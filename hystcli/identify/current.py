@@ -649,14 +649,6 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         # every stretch within 0.5 deg (or 10 %) of their median: a backlash the current shows
         # the same way after every reversal
         tol = max(0.5, 0.10 * abs(float(np.median(arr)))) if arr.size else 0.5
-        # a backlash read off falls alone (no held plateau) must show after every loaded
-        # reversal: the sheath friction flips over the same backlash each time, by a fall twice
-        # the unloading slope and degrees long, which noise does not hide; one fall of two is the
-        # unloading's own curvature at a turn (zoo sweep 3500484, a pretensioned stretch law with
-        # no backlash in its current: b_pos 2.8 deg read off one of two turns)
-        falls_only = bool(kept) and not any(s.plateau_held for s in kept)
-        if falls_only and len(pl) < loaded_after:
-            arr = arr[:0]
         if arr.size and np.all(np.abs(arr - np.median(arr)) <= tol) and 2 * len(pl) >= loaded_after:
             backlash["pos" if d > 0 else "neg"] = float(np.median(arr))
             backlash_se["pos" if d > 0 else "neg"] = max(
