@@ -264,8 +264,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
             # a loop the tip departs from may be a local optimum, not a missing effect: search
             # further starts first, and keep the fit that leaves the tip closer, unless it leaves
             # more of the loop undetermined (a degenerate optimum explains no more: withheld
-            # catheter 12003, a viscous backlash: 0.681 deg of misfit against 0.683, with d_pos, b_pos and
-            # b_neg free, where the first loop was whole)
+            # catheter 12003, a viscous backlash: 0.681 deg of misfit against 0.683, with d_pos,
+            # b_pos and b_neg undetermined, where the first fit left none so)
             more = fit_tip(q, y, starts, keep=chk.reversals, batches=MORE_BATCHES)
             more_misfit = systematic_misfit(more.model.forward(q, float(y[0])) - y, fs)
             if more_misfit < misfit and len(more.unidentified) <= len(fit.unidentified):

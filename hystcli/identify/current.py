@@ -554,18 +554,17 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         # Algorithm 1). Zoo sweeps 3600467 (a one-cycle sweep ending 7.7 deg into the dead
         # zone: a kink there, 1.8 deg past the other tendon's arrival, read d_pos 22.2 deg off at
         # exit 0, where the first stretch had it within 0.07) and 3500366 (d_neg 7.2 deg off)
+        first = [s.edge for i, s in enumerate(stretches) if s.direction == d and s.edge is not None
+                 and not s.from_reversal and i not in weak]
         cut = stretches[-1].edge if len(stretches) > 1 else None
-        first_edge = stretches[0].edge if stretches and stretches[0].direction == d and 0 not in weak else None
         if (ks and cut is not None and all(k is cut for k in ks)
-                and first_edge is not None and abs(first_edge.at - cut.at) > 1.0):
+                and first and abs(first[0].at - cut.at) > 1.0):
             ks = []
         if not ks:
             # the first stretch's edge only when no stretch from a reversal went past it and
             # failed to show it: the first starts from a state the current cannot tell (a tendon
             # may be taut with the tip held on its plateau), and where a stretch from a known
             # reversal saw no edge there, the first one's kink is something else
-            first = [s.edge for i, s in enumerate(stretches) if s.direction == d and s.edge is not None
-                     and not s.from_reversal and i not in weak]
             passed = [s for s in stretches if s.direction == d and s.from_reversal and first
                       and d * (q[s.stop] - first[0].at) > 1.0]
             ks = first if not passed else []
