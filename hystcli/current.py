@@ -502,9 +502,16 @@ def unloads_after_level(pieces, slopes, x, k: int, flat: float, sig: float) -> b
 
 def edge_piece(pieces, slopes, xb, sig) -> int | None:
     """Index of the flat piece that the loading edge ends (see the module docstring)."""
+    ranked = edge_pieces(pieces, slopes, xb, sig)
+    return ranked[0] if ranked else None
+
+
+def edge_pieces(pieces, slopes, xb, sig) -> list[int]:
+    """Every flat piece a loading edge may end, the likeliest first (:func:`edge_piece`'s choice:
+    the flattest start, of equals the later one)."""
     n = len(pieces)
     if n < 2:
-        return None
+        return []
     # the stretch must end loaded: its last piece rises clearly (or the one before a short last
     # piece, the reversal's rounding)
     def rises(k: int) -> bool:
@@ -513,8 +520,8 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
 
     short_last = xb[pieces[-1][1] - 1] - xb[pieces[-1][0]] < END_PIECE
     if not (rises(n - 1) or (short_last and n > 1 and rises(n - 2))):
-        return None
-    best, best_pre = None, math.inf
+        return []
+    found = []
     for j in range(n - 1):
         pre, post = slopes[j], slopes[j + 1]
         if post <= 0 or abs(pre) > JUMP_RATIO * post:
@@ -537,14 +544,15 @@ def edge_piece(pieces, slopes, xb, sig) -> int | None:
         # unloading's 29 and the dead zone's 6 mA/deg)
         if any(slopes[k] <= FLAT_AFTER * max(slopes[j + 1:k]) for k in later):
             continue
-        if pre <= best_pre:   # the flattest start; of equals the later one (the far side)
-            best, best_pre = j, pre
-    return best
+        found.append(j)
+    # the flattest start; of equals the later one (the far side)
+    return sorted(found, key=lambda j: (slopes[j], -j))
 
 
 def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
                  resolution: float | None = None, strict_flat: bool = False,
-                 select: bool = False, convex: bool = False, min_run: int = 0) -> Kink | None:
+                 select: bool = False, convex: bool = False, min_run: int = 0,
+                 fallback: bool = False) -> Kink | None:
     """Where a tendon is taken up on one monotone stretch, or None when it shows no such kink.
 
     ``q, c`` are points along the motion (binned samples, or a stepping search's readings);
@@ -560,7 +568,9 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     ``select``, the stretch is split into only as many pieces as the noise ``sig`` lets pay for
     themselves (:func:`pieces`). With ``convex``, the loaded side may stiffen but not sag
     (:func:`kink_fit`). With ``min_run``, a steeper piece ends the loaded run (a wall) only after
-    that many points of it: the fewest a caller needs past a kink to judge it.
+    that many points of it: the fewest a caller needs past a kink to judge it. With ``fallback``,
+    when the likeliest flat piece gives no clear kink, the next ones are tried in turn (a wall's
+    kink among them: the caller judges the loaded slope it finds).
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -570,9 +580,18 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
         return None
     pcs = pieces(x, c, minlen, sig if select else None)
     slopes = [d * m for (_, _, m, _) in pcs]
-    j = edge_piece(pcs, slopes, x, sig)
-    if j is None:
-        return None
+    ranked = edge_pieces(pcs, slopes, x, sig)
+    for j in ranked[:None if fallback else 1]:
+        kink = _edge_at(q, c, d, x, pcs, slopes, j, sig, minlen=minlen, resolution=resolution,
+                        strict_flat=strict_flat, convex=convex, min_run=min_run)
+        if kink is not None:
+            return kink
+    return None
+
+
+def _edge_at(q, c, d, x, pcs, slopes, j, sig, *, minlen, resolution, strict_flat, convex,  # noqa: ANN001
+             min_run) -> Kink | None:
+    """:func:`loading_edge`'s kink out of flat piece ``j``, or None when it is not clear."""
     # the kink fit sees the whole flat stretch before the jump (noise may have split it into
     # pieces) and the loaded run up to a wall (the next qualifying jump)
     first = j
