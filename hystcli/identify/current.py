@@ -491,6 +491,23 @@ def conditioned_current(run: Run, k: int, filter_hz: float | None = 20.0) -> np.
     return condition(raw, run.sample_rate if "t" in run else None, filter_hz)
 
 
+def _references(stretches: list[Stretch]) -> tuple[float, list[tuple[int, float]], float]:
+    """The record's references read off its stretches from a reversal: the no-load current, the
+    loaded slope of each stretch that read an edge (index, its kink's slope after), and their
+    median (NaN where there are none).
+
+    The no-load current, roughly, is the median level at which the stretches from a reversal saw
+    a tendon taken up, both ways, and an unloading tendon's current meet the dead zone (a kink
+    read where a held load starts to unload sits far from it, on the loaded side; with one edge
+    read each way, one of them such a kink, the edges alone put the level halfway and both fell
+    outside it: design seed 2005)."""
+    lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
+    c0 = float(np.median(lv)) if lv else math.nan
+    ups = [(i, s.loaded_slope) for i, s in enumerate(stretches) if s.from_reversal and s.loaded_slope is not None]
+    loaded_ref = float(np.median([a for _, a in ups])) if ups else math.nan
+    return c0, ups, loaded_ref
+
+
 def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -> CurrentReading:
     """Read the loading edges, backlash plateaus and levels of a sweep's (conditioned) current.
 
@@ -515,16 +532,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     doubts: dict[str, str] = {}
     # per side, the edge readings kept: the dead-zone piece's |dC/dq| and the loaded slope at them
     tilt: dict[str, tuple[float, float]] = {}
-    # the no-load current, roughly: the median level at which the stretches from a reversal saw
-    # a tendon taken up, both ways, and an unloading tendon's current meet the dead zone (a kink
-    # read where a held load starts to unload sits far from it, on the loaded side; with one
-    # edge read each way, one of them such a kink, the edges alone put the level halfway and
-    # both fell outside it: design seed 2005)
-    lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
-    c0 = float(np.median(lv)) if lv else math.nan
-    # the loaded slope of each stretch from a reversal that read an edge (its kink's slope after)
-    ups = [(i, s.loaded_slope) for i, s in enumerate(stretches) if s.from_reversal and s.loaded_slope is not None]
-    loaded_ref = float(np.median([a for _, a in ups])) if ups else math.nan
+    c0, ups, loaded_ref = _references(stretches)
     # a tendon taken up loads the motor at the tendon's stiffness, on every stretch that takes it
     # up: a kink whose loaded slope is a small share of what the record's other take-ups show is
     # no tendon taken up (the current's waviness, the tail of an unloading)
@@ -560,10 +568,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     if again:
         stretches = [again.get(i, s) for i, s in enumerate(stretches)]
         weak -= set(again)
-        lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
-        c0 = float(np.median(lv)) if lv else math.nan
-        ups = [(i, s.loaded_slope) for i, s in enumerate(stretches) if s.from_reversal and s.loaded_slope is not None]
-        loaded_ref = float(np.median([a for _, a in ups])) if ups else math.nan
+        c0, ups, loaded_ref = _references(stretches)
     # each stretch's end slope (what the load did just before the next reversal); a stretch too
     # short or slow to read its own takes the median of the stretches that turned within a
     # degree of the same knob angle, which met the same wall there
