@@ -149,6 +149,10 @@ TAUT_FLAT_READINGS = 2
 for that flat to be the tendon unloading, not a dead zone (:meth:`_Search._flat_taut_behind`):
 two, so one outlier does not decide."""
 
+LIMIT_AFTER = 3
+"""Fewest readings past a kink, over two steps or more, on which it is judged when the search can
+go no further (:meth:`_Search._judged_at_limit`) instead of :data:`AFTER_STEPS`."""
+
 LOAD = "load"
 ACCEPT, READY, WAIT, DOUBT, REFUSE = "accept", "ready", "wait", "doubt", "refuse"
 
@@ -681,6 +685,7 @@ class _Search:
         self.back: str | None = None  # why it turned back for the edge behind it (see _walk)
         self.pending_refusal: str | None = None
         self.ready = None            # an edge that passed every check on a short loaded stretch
+        self.waiting = None          # the last reading's kink, waiting for readings past it
         self.ready_log: list[tuple[int, float]] = []   # (readings, kink) of this segment's kinks that passed
         self.short = None            # (direction, kink): an edge at the start on a flat at the no-load level
         self.steep = {1: None, -1: None}    # a contact's rise straight out of the dead zone
@@ -733,6 +738,7 @@ class _Search:
         # a new segment: the motor's Coulomb friction jumps at a reversal, and no fit may span it
         self.dir = -self.dir
         self.ready = None
+        self.waiting = None
         self.seg_q, self.seg_c = [], []
         self.seg_from_start = False
         self.seg_back = False
@@ -825,9 +831,12 @@ class _Search:
             # tell a dead zone from the current's waviness by its slope, but not by its level,
             # which the identification measured: held in reserve (taken only when the search can
             # go no further) when it passes every other check from where the dead zone lies
-            if self.seg_from_start and not self.start_outside:
+            # So is one a taut start's unloading arrived at just before: the flat it leaves
+            # before the edge is short where the tendon behind unloads until nearly there
+            after_turn = self._after_taut_start()
+            if (self.seg_from_start and not self.start_outside) or after_turn:
                 status = REFUSE
-                if self._flat_on_no_load(kink, noise):
+                if self._flat_on_no_load(kink, noise) or (after_turn and self._flat_after_unloading(kink, noise)):
                     unplaced = dict(self.unplaced)   # a kink in reserve is no evidence to compare with
                     status = self._judge_rest(kink, noise, span_before)[0]
                     self.unplaced = unplaced
@@ -937,6 +946,72 @@ class _Search:
         return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
                     and abs(pinned) <= MAX_OFFSET_SE)
 
+    def _flat_in_dead_zone(self, kink, allowed: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether a kink whose flat stretch climbs further than a dead zone does is placed by the
+        dead zone's readings alone: fitted again on the readings from the model's dead-zone width
+        (and a degree) before it on, the kink stays within :data:`MAX_OFFSET_SE` of where it was
+        and that flat climbs no more than ``allowed`` mA.
+
+        A shift moves the dead zone and keeps its width. A flat longer than that width began
+        before the dead zone (a tendon still unloading); where that earlier stretch runs on in
+        the dead zone's own line (a load dropped at the reversal easing off at a pretensioned dead
+        zone's slope), it pulls the kink nowhere, and the kink stands (design replay 3700052,
+        examined in stop 32)."""
+        from .current import kink_fit
+
+        width = self.edges[1] - self.edges[-1]
+        if not width > 0:
+            return False
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        keep = self.dir * (q - (kink.at - self.dir * (width + 1.0))) >= 0
+        q, c = q[keep], c[keep]
+        if int(np.sum(self.dir * (kink.at - q) > 0)) < AFTER_STEPS:
+            return False
+        refit = kink_fit(q, c, self.dir, curved=False, min_side=2, resolution=self.u / 25.0, convex=True)
+        if refit is None or abs(refit.at - kink.at) > MAX_OFFSET_SE:
+            return False
+        return refit.before * self.dir * (refit.at - float(q[0])) <= allowed
+
+    def _after_taut_start(self) -> bool:
+        """Whether the segment is the one a taut start turned into: it crosses the dead zone from
+        the tendon the search began on (no contact, no turn from a slack start, no walk back)."""
+        return (self.start_outside and not self.turned and not self.seg_from_start and not self.seg_back
+                and not self.contacts)
+
+    def _flat_after_unloading(self, kink, noise: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether a kink's short flat is the dead zone's by its level, after the unloading of the
+        tendon a taut start held: the kink's level and every reading of its flat within the kink's
+        own no-load band (:meth:`_level_bands`); the readings before the flat (:data:`AFTER_STEPS`
+        or more) starting off that band on the side of the tendon behind, none off it on the other
+        side, and moving toward the no-load level along the motion; and the loaded line meeting
+        the flat's mean level within :data:`MAX_OFFSET_SE` of the kink (as
+        :meth:`_flat_on_no_load`).
+
+        A taut tendon unloads until the tip settles in its dead zone, which may leave only a
+        degree of the dead zone's flat before the other edge (design replay 3700381: a dead zone
+        3.1 deg wide, two readings over 0.8 deg at the no-load level, the kink 0.01 deg from the
+        edge, refused at the travel limit). The level tells that flat from the current's
+        waviness: an unloading that arrives at the no-load level and stays there is a tendon gone
+        slack."""
+        c0 = self.th.no_load(self.dir, self.moving)[0]
+        if c0 is None or kink.after <= 0 or kink.n_before < 2:
+            return False
+        _, _, band_own = self._level_bands(kink, noise)
+        q, c = np.array(self.seg_q), np.array(self.seg_c)
+        before = self.dir * (q - kink.at) < 0
+        qb, cb = q[before], c[before]
+        flat, lead_q, lead_c = cb[-kink.n_before:], qb[:-kink.n_before], cb[:-kink.n_before]
+        if lead_c.size < AFTER_STEPS:
+            return False
+        load = self.dir * (lead_c - c0)     # loading-positive: the tendon behind pulls it negative
+        if not (load[0] < -band_own and np.all(load <= band_own)):
+            return False
+        if not _ls_slope(self.dir * lead_q, load) > 0:
+            return False
+        pinned = (float(np.mean(flat)) - kink.level) / kink.after
+        return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(flat - c0) <= band_own)
+                    and abs(pinned) <= MAX_OFFSET_SE)
+
     def _judge_rest(self, kink, noise: float, span_before: float) -> tuple[str, str]:  # noqa: ANN001
         """:meth:`_judge`'s checks of a kink whose flat stretch is long enough to be one."""
         # a dead zone climbs at most its pretension's swing across its whole width: a flat
@@ -946,7 +1021,7 @@ class _Search:
         if self.margin is None and self.th.dead_zone_swing > 0:
             climb = kink.before * span_before
             allowed = 2.0 * self.th.dead_zone_swing + self.th.no_load(self.dir, self.moving, swing=0.0)[1]
-            if climb > allowed:
+            if climb > allowed and not self._flat_in_dead_zone(kink, allowed):
                 return REFUSE, (f"the current before the kink at {kink.at:.2f} deg climbs {climb:.3g} mA over "
                                 f"{span_before:.1f} deg, more than a dead zone does ({allowed:.3g}): a tendon "
                                 "unloading toward it")
@@ -1259,6 +1334,9 @@ class _Search:
                     # the edge passed every check on the readings there are: the search can go no
                     # further to lengthen its loaded stretch
                     return LOAD, self.ready
+                last = self._judged_at_limit()
+                if last is not None:
+                    return LOAD, last
                 if self.short is not None:
                     # no edge with a flat long enough to read lay within reach: the one at the
                     # start, whose few flat readings sat at the no-load level, is the evidence there is
@@ -1282,6 +1360,25 @@ class _Search:
                     self.seg_back = True
                     continue
                 raise
+
+    def _judged_at_limit(self):  # noqa: ANN202 - Kink or None
+        """The kink the search was waiting on when it could go no further, judged on the readings
+        past it there are (:data:`LIMIT_AFTER` of them, over two steps or more), or None.
+
+        A kink waits for :data:`AFTER_STEPS` readings over 1.5 deg past it before it is judged; an
+        edge that lies within the last steps before a travel limit or the end of a record never
+        gets them, however clearly the readings there show it (design replay 3700050: a kink of
+        clarity 124, placed to +-0.01 deg, three readings over 1.3 deg before the limit). Every
+        other check still applies, the offset's standard error among them."""
+        kink = self.waiting
+        if kink is None:
+            return None
+        status, why = self._judge(kink, min_after=LIMIT_AFTER, min_span=2.0 * self.u - 1e-9)
+        if status in (ACCEPT, READY) and self._drifted(kink) is None:
+            return kink
+        if why:
+            self.pending_refusal = why
+        return None
 
     def _released(self) -> bool:
         """Whether the tendon the walk back would take up is slack by now: the current has come
@@ -1402,6 +1499,7 @@ class _Search:
                 return LOAD, kink
             if status == READY:
                 self.ready = kink
+            self.waiting = kink if status == WAIT else None
             if why:
                 self.pending_refusal = why
             if (kink is None or status == REFUSE) and self.ready is None and self._taut_without_edge(c):

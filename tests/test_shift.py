@@ -15,7 +15,7 @@ from hystcli import twin
 from hystcli.errors import DataError, LinkError, ShiftDetectionError
 from hystcli.io import Run
 from hystcli.model import Geometry, KnobIdentification, KnobModel, Model, Shape
-from hystcli.shift import (DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
+from hystcli.shift import (AFTER_STEPS, DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
                            apply_shift, default_max_travel, detect_shift, plot_shift, resolve_thresholds)
 
 # A catheter of the twin fixed here (DESIGN.md section 6's example knob and a second knob like
@@ -393,3 +393,57 @@ def test_end_to_end_with_the_model_identify_makes():
         for k in (1, 2):
             r = detect_shift(model, ReplayProbe(run, k), k)
             assert r.offset == pytest.approx(float(run.meta[f"true_offset{k}"]), abs=0.5), (shape, k)
+
+
+def test_an_edge_in_the_last_steps_before_the_travel_limit_is_judged_on_the_readings_there():
+    # dead zone [-20, 8] (the positive edge the straight one's, 9, shifted by -1; the negative
+    # one out of reach): the search meets the positive tendon at 8 deg. A kink waits for four
+    # readings over 1.5 deg past it before it is judged; with a travel limit of 9.5 deg there are
+    # three (8.5, 9.0, 9.5), and the kink is judged on them once the search can go no further
+    p = LawProbe(-20.0, 8.0, seed=5)
+    r = detect_shift(LAW_MODEL, p, 1, max_travel=9.5)
+    assert r.edge == "pos" and r.evidence.n_after == 3 < AFTER_STEPS
+    assert r.offset == pytest.approx(-1.0, abs=0.1)
+    assert max(p.moves) <= 9.5 and p.q == 0.0
+    # two readings past it (a limit of 9 deg) are too few: the search refuses
+    p = LawProbe(-20.0, 8.0, seed=5)
+    with pytest.raises(ShiftDetectionError, match="no edge found"):
+        detect_shift(LAW_MODEL, p, 1, max_travel=9.0)
+    assert max(p.moves[:-1]) <= 9.0 and p.q == 0.0
+
+
+class _UnloadsIntoTheDeadZone(LawProbe):
+    """The knob rests with the positive tendon taut whose load follows the tip: moving down it
+    unloads until ``u0``, a degree short of the negative edge ``dn`` (the tip settles on its
+    dead-zone plateau only there), and is taken up again at ``dp`` once the knob has been below
+    ``u0``. ``level``: how far the dead zone's current sits off the no-load level (mA)."""
+
+    def __init__(self, dn, dp, u0, level=0.0, **kw):
+        super().__init__(dn, dp, **kw)
+        self.u0, self.level, self.low = u0, level, math.inf
+
+    def current(self, q, d):
+        self.low = min(self.low, q)
+        pos = max(q - self.u0, 0.0) if self.low > self.u0 else max(q - self.dp, 0.0)
+        c = 120.0 + 6.0 * d + 4.0 * (pos - max(self.dn - q, 0.0))
+        return c + (self.level if self.dn < q < self.dp else 0.0) + self.rng.normal(0.0, self.noise)
+
+
+def test_a_short_dead_zone_flat_after_a_taut_starts_unloading_is_read_by_its_level():
+    # dead zone [-6, 8] (the straight one shifted by -1); the positive tendon unloads down to -5,
+    # leaving two readings of the dead zone's flat (-5.5, -6.0) before the negative edge. Too
+    # short a flat to tell from the current's waviness by its slope, but it sits at the no-load
+    # level after an unloading that arrived there: held in reserve, and taken at the travel limit
+    p = _UnloadsIntoTheDeadZone(-6.0, 8.0, -5.0, seed=6)
+    r = detect_shift(LAW_MODEL, p, 1, max_travel=20.0)
+    assert r.start_outside and r.edge == "neg" and r.evidence.n_before < AFTER_STEPS
+    assert r.offset == pytest.approx(-1.0, abs=0.15)
+    assert p.q == 0.0
+    # the same short flat 12 mA off the no-load level (beyond the kink's own band) is no dead
+    # zone the level can vouch for: no offset from it
+    p = _UnloadsIntoTheDeadZone(-6.0, 8.0, -5.0, level=12.0, seed=6)
+    try:
+        r = detect_shift(LAW_MODEL, p, 1, max_travel=20.0)
+    except ShiftDetectionError:
+        return
+    assert r.edge_found_at != pytest.approx(-6.0, abs=0.5)

@@ -285,3 +285,38 @@ def test_a_current_only_model_reads_no_load_past_a_held_load_it_could_not_call_b
     except ShiftDetectionError:
         return
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_an_edge_a_few_steps_before_the_travel_limit_is_read_on_the_readings_there_are():
+    # design replay 3700050 (a drop-at-reversal plant shifted -12.03 deg; examined in stop 32):
+    # the knob rests with the positive tendon taut, the search crosses the dead zone and meets
+    # the negative tendon at -14.39 deg, 1.8 deg short of its travel limit (16.44 deg). Three
+    # readings past the kink (clarity 124, placed to +-0.01 deg) where it waits for four over
+    # 1.5 deg: stop 31's code refused at the limit with that kink waiting
+    case, detect = _detect(3700050)
+    r = detect()
+    assert r.start_outside and r.edge == "neg" and r.evidence.n_after < shift.AFTER_STEPS
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_dead_zone_flat_two_readings_long_after_a_taut_starts_unloading_is_read_by_its_level():
+    # design replay 3700381 (a drop-at-reversal plant shifted -4.86 deg, dead zone 3.1 deg wide;
+    # examined in stop 32): the positive tendon, taut at the start, unloads down to -5.8 deg,
+    # leaving two readings of the dead zone's flat, at the no-load level, before the negative
+    # edge at -7.06 deg. Stop 31's code refused: "too short a flat stretch before it"
+    case, detect = _detect(3700381)
+    r = detect()
+    assert r.start_outside and r.edge == "neg" and r.evidence.n_before < shift.AFTER_STEPS
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_flat_longer_than_the_dead_zone_in_one_line_with_it_does_not_hide_the_edge():
+    # design replay 3700052 (a pretensioned plant shifted +17.24 deg; examined in stop 32): from
+    # a taut start the current climbs in one line at the dead zone's own slope from the turn to
+    # the positive edge, longer than the dead zone is wide, so more than a dead zone climbs. The
+    # kink fitted on the readings of the dead zone's width alone stays where it was: the edge.
+    # Stop 31's code refused it ("a tendon unloading toward it") and reached the replay's end
+    case, detect = _detect(3700052)
+    r = detect()
+    assert r.start_outside and r.edge == "pos"
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
