@@ -55,7 +55,10 @@ real current is not one law:
   zone behind it. (Where a slack search begins a step or two short of an edge, the few readings
   before it may still sit at the no-load level the identification measured, which a dead zone's
   do: that edge is held in reserve and taken only when the search can go no further, the far
-  edge out of reach.) The offset must be placed to
+  edge out of reach; so is one whose few flat readings follow a taut start's unloading that
+  arrived at that level.) A kink the search is still waiting on when it can go no further is
+  judged on the readings past it there are, three at least (:data:`LIMIT_AFTER`). The offset must
+  be placed to
   :data:`MAX_OFFSET_SE`: the kink's standard error (a loosely placed kink waits for more of the
   loaded stretch) and, on the stretch from where
   the search began, how far back the edge would lie were the flat the taken-up tendon's backlash
