@@ -1113,3 +1113,38 @@ def test_a_kink_on_the_records_cut_last_stretch_does_not_outvote_the_first_stret
     assert any("only the record's first stretch shows the positive tendon" in w for w in fit.warnings)
     assert abs(fit.model.d_pos - case.truth.d_pos) <= 0.5
     _assert_within(fit, case.truth, ("d_neg",))
+
+
+def test_current_only_does_not_read_the_low_pass_ringing_after_a_drop_as_a_held_load():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # design sweep 3800181 (a drop law, examined in stop 32): the force drops by 300 mA as the
+    # knob reverses at 47 deg/s, holds for b_pos = 0.39 deg and unloads. Our 20 Hz conditioning
+    # low-pass undershoots after that step and recovers over 50 ms, 2.3 deg of knob, which lay
+    # level as a held load does: b_pos was returned 2.34 deg at +-0.3 (1.96 off, exit 0). The
+    # plateau after a step must now go on past the filter's ringing; this one does not show
+    case = plants.sweep_case(3800181, tip=False)
+    assert case.family == "drop-at-reversal"
+    fit = identify(parse_run(case.record.csv_text(), source="z"), use_tip=False).fits[1]
+    _assert_within(fit, case.truth, ("d_pos", "d_neg"))
+    assert "b_pos" not in fit.stderr or abs(fit.model.b_pos - case.truth.b_pos) <= 1.0
+
+
+def test_the_ringing_guard_follows_a_step_only():
+    from hystcli.current import condition
+    from hystcli.identify.current import _ring_until
+
+    # a knob turning back at 40 deg/s from a reversal at t = 0.2 s, sampled at 1 kHz; the current
+    # unloads at 10 mA/deg, after a 200 mA drop at the reversal or without one. The 20 Hz low-pass
+    # rings for 1/20 s after a step: 2 deg of knob from the step on (hand-computed: 40 * 0.05)
+    t = np.arange(0.0, 1.0, 1e-3)
+    x = 40.0 * np.clip(t - 0.2, 0.0, None)
+    ramp = 500.0 - 10.0 * x
+    stretch = t >= 0.2
+    for drop, expect in ((200.0, 2.0), (0.0, 0.0)):
+        c = condition(np.where(stretch, ramp - drop, 500.0 + 10.0 * 40.0 * (t - 0.2)), 1000.0, 20.0)
+        got = _ring_until(x[stretch], c[stretch], t[stretch], 1.0 / 20.0)
+        assert got == pytest.approx(expect, abs=0.15), drop
+    # without the low-pass there is nothing to ring
+    assert _ring_until(x[stretch], np.where(stretch, ramp - 200.0, 0.0)[stretch], t[stretch], 0.0) == 0.0

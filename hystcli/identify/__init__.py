@@ -250,7 +250,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
     c = conditioned_current(run, k, filter_hz)
-    reading = read_current(q, c, t, chk) if c is not None else None
+    reading = read_current(q, c, t, chk, ring_s=1.0 / filter_hz if filter_hz else 0.0) if c is not None else None
     warnings: list[str] = []
     ambiguous_edges: list[str] = []
     where_k = f"{where}knob {k}"
@@ -626,5 +626,5 @@ def current_levels(run: Run, knob: int, model: KnobModel, filter_hz: float | Non
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float)
     c = condition(np.asarray(run[f"c{k}"], float), run.sample_rate, filter_hz)
-    reading = read_current(q, c, t, chk)
+    reading = read_current(q, c, t, chk, ring_s=1.0 / filter_hz if filter_hz else 0.0)
     return _levels(q, c, t, model, None, reading, chk, None, {})

@@ -20,7 +20,9 @@ is (DESIGN.md section 4):
   unloading is read from the unloading back (:func:`_held_plateau`), up to :data:`HELD_RATIO`
   times it; its end is placed by a two-line fit, like an edge (:func:`_refine_end`). A fall
   read as the flip needs an unloading after it clearly steeper than the dead zone: one no steeper
-  is the dead zone's tilt, and the "flip" the unloading itself (:data:`TILT_UNLOAD`).
+  is the dead zone's tilt, and the "flip" the unloading itself (:data:`TILT_UNLOAD`). After a
+  step at the reversal (a force dropped at once), a held plateau must go on for a degree past the
+  conditioning low-pass's ringing (:func:`_ring_until`), which lies level for a while too.
 * the **levels**: the no-load current of each direction (the motor's Coulomb friction moves it
   with the direction of motion), the loaded slope and the dead zone's slope, which Algorithm 1
   needs for its thresholds.
@@ -215,6 +217,11 @@ SLOW = 0.25
 reading: where a sine sweep slows into its reversal the motor's Coulomb and viscous friction
 fade, and the current moves with the speed rather than the tendon."""
 
+RING_STEP = 5.0
+"""A current that changes this many times faster (mA/s) just after a reversal than the 90th
+percentile of its stretch has stepped there (a force dropped at once): the low-pass that
+conditioned it rings after the step (:func:`read_stretch`'s ``ring_s``)."""
+
 GUARD_S = 0.075
 """Time (s) at either end of a stretch left out of its edge reading: the 20 Hz low-pass (the
 lab's, or ours) rounds the corner a reversal makes in the current over about this long."""
@@ -222,11 +229,12 @@ lab's, or ours) rounds the corner a reversal makes in the current over about thi
 
 def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: int, direction: int,
                  from_reversal: bool, noise: float, edge_after: float | None = None,
-                 fallback: bool = False) -> Stretch:
+                 fallback: bool = False, ring_s: float = 0.0) -> Stretch:
     """Read one monotone stretch (see the module docstring). ``edge_after`` (a knob angle): the
     loading edge read only from the samples past it along the motion; ``fallback``: when the
     likeliest flat piece shows no clear take-up, the next ones are tried
-    (:func:`hystcli.current.loading_edge`)."""
+    (:func:`hystcli.current.loading_edge`); ``ring_s``: how long (s) the low-pass that conditioned
+    the current rings after a step (one period of its cut-off; 0 when none was applied)."""
     d = direction
     qq, cc, tt = q[start:stop + 1], c[start:stop + 1], t[start:stop + 1]
     x = d * (qq - qq[0])                     # travel along the motion
@@ -268,7 +276,8 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         plateau, held, span = _plateau(pa, sa, xp, sig, from_reversal,
                                        _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)),
                                        slow_until=slow_until,
-                                       dead_tilt=abs(kink.before) if kink is not None else 0.0)
+                                       dead_tilt=abs(kink.before) if kink is not None else 0.0,
+                                       ring_until=_ring_until(x, cc, tt, ring_s))
         if plateau is not None:
             # the segmentation's boundary is good to a bin or two; the end of a held load is a
             # kink, placed like an edge (design seeds 0-1799: median error 0.062 -> 0.022 deg,
@@ -305,8 +314,32 @@ flipping sign (:func:`_plateau`); a steeper piece short of it, right before the 
 the stiff end of the unloading itself."""
 
 
+def _ring_until(x: np.ndarray, c: np.ndarray, t: np.ndarray, ring_s: float) -> float:
+    """Travel from a reversal (deg) up to which the conditioning low-pass rings, when the current
+    steps there (:data:`RING_STEP`); 0 otherwise.
+
+    A force that drops at once as the knob reverses (a sheath's friction flipping) is a step,
+    and a zero-phase Butterworth's response to a step undershoots and recovers for about one
+    period of its cut-off after it (at 20 Hz, a 300 mA drop: 10-15 mA under the line from 20 to
+    40 ms). At a brisk turn that is degrees of knob, and the current there lies level for a
+    while, as a held load does (design sweep 3800181, a drop law: 2.3 deg read as a backlash of
+    0.39 at 47 deg/s)."""
+    if not ring_s > 0 or t.size < 4:
+        return 0.0
+    rate = np.abs(np.gradient(c, t))
+    head = np.flatnonzero(t <= t[0] + 2.0 * ring_s)
+    if head.size < 2:
+        return 0.0
+    top = float(np.percentile(rate, 90))
+    i = int(head[np.argmax(rate[head])])
+    if not rate[i] > RING_STEP * top:
+        return 0.0
+    return float(np.max(x[t <= t[i] + ring_s]))
+
+
 def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None,
-             slow_until: float = 0.0, dead_tilt: float = 0.0) -> tuple[float | None, bool, tuple | None]:
+             slow_until: float = 0.0, dead_tilt: float = 0.0,
+             ring_until: float = 0.0) -> tuple[float | None, bool, tuple | None]:
     """Travel from a reversal to where the tendon starts unloading (the backlash), when it shows.
 
     The stretch after a loaded reversal runs: the backlash phase (a plateau while the sheath
@@ -317,7 +350,9 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None,
     piece) rather than read off a steep fall, and the travel span of the two pieces either side of
     the plateau's end (where :func:`_refine_end` places it). ``slow_until``: the travel from the
     reversal at which the knob first moves briskly (:data:`SLOW`); ``dead_tilt``: ``|dC/dq|`` of the
-    dead zone before this stretch's loading edge (0 when it shows none).
+    dead zone before this stretch's loading edge (0 when it shows none); ``ring_until``: the travel
+    up to which the conditioning low-pass rings after a step at the reversal
+    (:func:`_ring_until`), over which no piece counts as held.
     """
     if not from_reversal or dead is None:
         return None, False, None
@@ -358,8 +393,13 @@ def _plateau(pieces, slopes, xb, sig, from_reversal, dead: int | None,
         ju -= 1
     background, rel = _background(slopes[dead], unload)
 
+    # a bin's half-width: a piece's points are bin centres, and it spans half a bin beyond them
+    half_bin = 0.5 * float(np.median(np.diff(xb))) if xb.size > 1 else 0.0
+
     def held(k: int) -> bool:
-        return _level(slopes[k], background, rel) and lengths[k] >= 1.0
+        # flat for a degree, and for a degree past the low-pass's ringing after a step
+        past_ring = xb[pieces[k][1] - 1] + half_bin - max(float(xb[pieces[k][0]]) - half_bin, ring_until)
+        return _level(slopes[k], background, rel) and lengths[k] >= 1.0 and (ring_until <= 0.0 or past_ring >= 1.0)
 
     # a stiffening cable unloads convexly: steepest just after the plateau, where its load is
     # largest, and the segmentation splits the unloading into pieces that soften in turn. After a
@@ -508,7 +548,8 @@ def _references(stretches: list[Stretch]) -> tuple[float, list[tuple[int, float]
     return c0, ups, loaded_ref
 
 
-def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -> CurrentReading:
+def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
+                 ring_s: float = 0.0) -> CurrentReading:
     """Read the loading edges, backlash plateaus and levels of a sweep's (conditioned) current.
 
     Parameters
@@ -517,6 +558,9 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
         Knob command (deg), conditioned motor current (:func:`hystcli.current.condition`), time (s).
     chk : SweepCheck
         The sweep's reversals.
+    ring_s : float
+        How long (s) the low-pass that conditioned the current rings after a step (one period of
+        its cut-off, :func:`_ring_until`); 0 (the default) when it was not low-passed.
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -524,7 +568,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
     noise = robust_noise(c)
     stretches = []
     for i, (a, b, d) in enumerate(chk.segments):
-        stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise))
+        stretches.append(read_stretch(q, c, t, a, b, d, from_reversal=i > 0, noise=noise, ring_s=ring_s))
     edges, edges_se, backlash, backlash_se, levels = {}, {}, {}, {}, {}
     # the reading's resolution: the typical bin width (deg) of the stretches read
     resolution = float(np.median([s.resolution for s in stretches])) if stretches else 0.5
@@ -562,7 +606,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck) -
             continue
         ref = float(np.median(others))
         r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=s.from_reversal, noise=noise,
-                         edge_after=s.edge.at if s.edge is not None else None, fallback=True)
+                         edge_after=s.edge.at if s.edge is not None else None, fallback=True, ring_s=ring_s)
         if r.edge is not None and LOADED_SHARE * ref <= r.edge.after <= LOADED_BAND * ref:
             again[i] = r
     if again:
