@@ -942,12 +942,15 @@ class _Search:
             return False
         if before.size > 1:
             before = before[1:]
-        # the few readings' own slope is loose: the edge where the loaded line meets the mean
-        # level of the kink's flat readings (a dead zone's flat) must agree with the fitted kink
-        # to MAX_OFFSET_SE
-        pinned = (float(np.mean(own)) - kink.level) / kink.after
         return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
-                    and abs(pinned) <= MAX_OFFSET_SE)
+                    and self._pinned(kink, own))
+
+    @staticmethod
+    def _pinned(kink, flat: np.ndarray) -> bool:  # noqa: ANN001 - hystcli.current.Kink
+        """Whether the loaded line meets the mean level of a kink's few flat readings within
+        :data:`MAX_OFFSET_SE` of the fitted kink: those readings' own slope is loose, so where the
+        loaded line meets their level (a dead zone's flat) must agree with the kink."""
+        return abs((float(np.mean(flat)) - kink.level) / kink.after) <= MAX_OFFSET_SE
 
     def _flat_in_dead_zone(self, kink, allowed: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
         """Whether a kink whose flat stretch climbs further than a dead zone does is placed by the
@@ -987,7 +990,7 @@ class _Search:
         own no-load band (:meth:`_level_bands`); the readings before the flat (:data:`AFTER_STEPS`
         or more) starting off that band on the side of the tendon behind, none off it on the other
         side, and moving toward the no-load level along the motion; and the loaded line meeting
-        the flat's mean level within :data:`MAX_OFFSET_SE` of the kink (as
+        the flat's mean level within :data:`MAX_OFFSET_SE` of the kink (:meth:`_pinned`, as
         :meth:`_flat_on_no_load`).
 
         A taut tendon unloads until the tip settles in its dead zone, which may leave only a
@@ -1011,9 +1014,8 @@ class _Search:
             return False
         if not _ls_slope(self.dir * lead_q, load) > 0:
             return False
-        pinned = (float(np.mean(flat)) - kink.level) / kink.after
         return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(flat - c0) <= band_own)
-                    and abs(pinned) <= MAX_OFFSET_SE)
+                    and self._pinned(kink, flat))
 
     def _judge_rest(self, kink, noise: float, span_before: float) -> tuple[str, str]:  # noqa: ANN001
         """:meth:`_judge`'s checks of a kink whose flat stretch is long enough to be one."""

@@ -29,7 +29,7 @@ from ..current import cogging_ripple, condition
 from ..errors import IdentificationError, ModelError
 from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
-from .current import UNLOAD_LEVEL, CurrentReading, conditioned_current, read_current
+from .current import UNLOAD_LEVEL, CurrentReading, conditioned_current, read_current, ringing_time
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
@@ -250,7 +250,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
     c = conditioned_current(run, k, filter_hz)
-    reading = read_current(q, c, t, chk, ring_s=1.0 / filter_hz if filter_hz else 0.0) if c is not None else None
+    reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz)) if c is not None else None
     warnings: list[str] = []
     ambiguous_edges: list[str] = []
     where_k = f"{where}knob {k}"
@@ -626,5 +626,5 @@ def current_levels(run: Run, knob: int, model: KnobModel, filter_hz: float | Non
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float)
     c = condition(np.asarray(run[f"c{k}"], float), run.sample_rate, filter_hz)
-    reading = read_current(q, c, t, chk, ring_s=1.0 / filter_hz if filter_hz else 0.0)
+    reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz))
     return _levels(q, c, t, model, None, reading, chk, None, {})

@@ -314,6 +314,12 @@ flipping sign (:func:`_plateau`); a steeper piece short of it, right before the 
 the stiff end of the unloading itself."""
 
 
+def ringing_time(filter_hz: float | None) -> float:
+    """How long (s) the conditioning low-pass rings after a step: one period of its cut-off
+    (:func:`read_current`'s ``ring_s``); 0 without a low-pass."""
+    return 1.0 / filter_hz if filter_hz else 0.0
+
+
 def _ring_until(x: np.ndarray, c: np.ndarray, t: np.ndarray, ring_s: float) -> float:
     """Travel from a reversal (deg) up to which the conditioning low-pass rings, when the current
     steps there (:data:`RING_STEP`); 0 otherwise.
@@ -580,11 +586,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
     # a tendon taken up loads the motor at the tendon's stiffness, on every stretch that takes it
     # up: a kink whose loaded slope is a small share of what the record's other take-ups show is
     # no tendon taken up (the current's waviness, the tail of an unloading)
-    weak = set()
-    for i, s in enumerate(stretches):
-        others = [a for j, a in ups if j != i]
-        if s.edge is not None and others and s.edge.after < LOADED_SHARE * float(np.median(others)):
-            weak.add(i)
+    # per stretch, the median loaded slope of the record's other take-ups (None without any)
+    others_median = [float(np.median(o)) if o else None
+                     for o in ([a for j, a in ups if j != i] for i in range(len(stretches)))]
+    weak = {i for i, s in enumerate(stretches) if s.edge is not None and others_median[i] is not None
+            and s.edge.after < LOADED_SHARE * others_median[i]}
     # A dead zone whose current bends (the motor's viscous term following a sine's speed) may
     # split into a flat piece and a barely tilted one: the jump between them is the flattest
     # start, and it reads as a weak kink or as none, where the tendon's own jump follows on the
@@ -601,11 +607,10 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
     # refused by identify now, no offset more than 0.5 deg off.
     again = {}
     for i, s in enumerate(stretches):
-        others = [a for j, a in ups if j != i]
-        if not others or not s.from_reversal or (s.edge is not None and i not in weak):
+        ref = others_median[i]
+        if ref is None or not s.from_reversal or (s.edge is not None and i not in weak):
             continue
-        ref = float(np.median(others))
-        r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=s.from_reversal, noise=noise,
+        r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=True, noise=noise,
                          edge_after=s.edge.at if s.edge is not None else None, fallback=True, ring_s=ring_s)
         if r.edge is not None and LOADED_SHARE * ref <= r.edge.after <= LOADED_BAND * ref:
             again[i] = r
