@@ -45,6 +45,13 @@ FLAT_AFTER = 0.35
 whichever is steeper, with a 20 % margin) is a dead zone still to come: the jump was a tendon
 unloading, or the end of a backlash plateau."""
 
+MERGE_RESIDUAL = 2.0
+"""A kink fitted with the pieces merged into the flat one (as noise-split dead zone) whose residual
+is more than this many times the residual of the same take-up fitted on the flat piece alone (or
+the points' noise, if larger) had no straight dead zone before it: the merged pieces were a tendon
+unloading, and the flat piece alone places the kink (:func:`loading_edge`). Chosen on design
+sweeps; 2 was the one value tried."""
+
 END_PIECE = 1.5
 """A last piece shorter than this (deg) is the rounding of the reversal, not a feature."""
 
@@ -642,6 +649,21 @@ def _edge_at(q, c, d, x, pcs, slopes, j, sig, *, minlen, resolution, strict_flat
     curved = stop - pcs[j + 1][0] >= 10
     kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
                     curved=curved, min_side=max(2, minlen // 2), resolution=resolution, convex=convex)
+    # the merge above tells a noise-split dead zone from an unloading by slope alone; one that
+    # starts at the reversal, with no held level before it (a drop law's tendon unloading at a
+    # share of its loaded slope), passes for a tilted dead zone, and the two-line fit through it
+    # leans the kink late (design sweep 3800430: d_pos 1.1 deg late at +-0.25, a residual of 60
+    # noise sigmas). The pieces merged must leave the fit straight: where the flat piece alone
+    # fits the same take-up (its loaded slope within half) far better and flatter, it places
+    # the kink. (The same loaded slope: a wall's kink after a soft take-up is another kink.)
+    if first < j and kink is not None and not strict_flat:
+        own = pcs[j][0]
+        alone = kink_fit(q[own:stop], c[own:stop], d, lo=q[own], hi=q[min(hi_b, stop - 1)],
+                         curved=curved, min_side=max(2, minlen // 2), resolution=resolution, convex=convex)
+        if (alone is not None and alone.clarity >= MIN_CLARITY and alone.after > 0
+                and abs(alone.before) < abs(kink.before) and abs(alone.after - kink.after) <= 0.5 * kink.after
+                and kink.residual > MERGE_RESIDUAL * max(alone.residual, sig)):
+            kink = alone
     if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
         return None
     return kink

@@ -930,6 +930,34 @@ def test_a_loading_edge_after_a_gentle_unloading_is_fitted_on_the_dead_zone_alon
     assert kink.residual < 2 * 0.2
 
 
+def test_a_loading_edge_after_an_unloading_from_the_reversal_is_fitted_on_the_dead_zone_alone():
+    from hystcli.current import loading_edge
+
+    # as above without the held load: a drop law's tendon unloading from the reversal on, at
+    # 6 mA/deg over 30 deg (0.15 of the jump, so it may pass for a tilted dead zone, and no level
+    # piece before it to call it an unloading), the dead zone to 43 deg, the tendon taken up at
+    # 40 mA/deg (design sweep 3800430: fitted as one line with the dead zone it put d_pos 1.1 deg
+    # late, at a residual of 60 noise sigmas)
+    rng = np.random.default_rng(1)
+    x = np.arange(0.0, 62.0, 0.5)
+    c = np.where(x < 30, -180.0 + 6.0 * x, 0.0) + np.where(x > 43, 40.0 * (x - 43), 0.0)
+    kink = loading_edge(x, c + rng.normal(0.0, 0.2, x.size), 1, 0.2, minlen=2, resolution=0.05)
+    assert abs(kink.at - 43.0) < 0.1
+    assert kink.residual < 2 * 0.2
+
+
+@pytest.mark.parametrize("seed", [3800430, 2109, 1691])
+def test_current_only_places_an_edge_after_an_unloading_from_the_reversal_on_the_dead_zone(seed):
+    # independent plants (design seeds: a spiky drop law, a drop law, a coulomb-viscous one): the
+    # stretch from each reversal unloads the other tendon at once, at a share of its loaded
+    # slope, into the dead zone; stop 32's code fitted that unloading as part of the flat and
+    # returned an edge 1.1, 1.0 and 1.9 deg late at +-0.25 (exit 0)
+    case, fit = _zoo_current_fit(seed)
+    names = [n for n in ("d_pos", "d_neg") if n in fit.stderr]
+    assert names
+    _assert_within(fit, case.truth, names, tol=0.25)
+
+
 def test_current_only_reads_a_held_plateau_before_a_gentle_unloading():
     # independent drop-at-reversal plant (design seed 2098): after each reversal the current drops,
     # holds for the backlash (10.6 and 16.4 deg) and unloads five times more gently than it loads.
