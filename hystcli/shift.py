@@ -1038,8 +1038,9 @@ class _Search:
             # this kink, beside where the sweep's current put the edge, must agree with it)
             self.unplaced[self.dir] = kink
             return REFUSE, (f"a tendon was taken up at {kink.at:.2f} deg, but the identification could not "
-                            f"place {edge} (its dead-zone flat was too narrow to see on the sweep), so that edge "
-                            "gives no offset; identify on a slower sweep")
+                            f"place {edge} (identify's warning says why: a dead-zone flat too narrow to see, "
+                            "an edge only the record's first stretch shows, or two loops the record cannot "
+                            "tell apart), so that edge gives no offset; identify again on a sweep that shows it")
         if model_se > MAX_MODEL_SE:
             return REFUSE, (f"the model's {edge} is itself known only to +-{model_se:.2f} deg (its "
                             "identification's standard error): no offset from it is surer than that")
