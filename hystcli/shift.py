@@ -928,7 +928,8 @@ class _Search:
         """Whether a kink's few readings before it are the dead zone's by their level: on the
         stretch from where a slack search began (no taut start, turn or contact), the kink's level
         and every reading before it (but the first, where a stiction burst may sit, unless it is
-        the only one) within the kink's own no-load band (:meth:`_level_bands`), and the loaded
+        the only one, and the burst's tail after it) within the kink's own no-load band
+        (:meth:`_level_bands`), and the loaded
         line meeting the mean level of the kink's flat readings within :data:`MAX_OFFSET_SE` of
         the kink."""
         if not self.seg_from_start or self.start_outside or self.contacts:
@@ -941,7 +942,14 @@ class _Search:
         if before.size == 0 or kink.after <= 0:
             return False
         if before.size > 1:
-            before = before[1:]
+            # the burst's tail: readings off the band on the loading side of the no-load level that
+            # fall back toward it as the knob moves on, which no tendon ahead does (design replay
+            # 3900103: a 192-mA burst at the start, -64, -21 and -9 mA against a level of -7)
+            k = 1
+            while (k < before.size - 1 and self.dir * (before[k] - c0) > band_own
+                   and abs(before[k] - c0) < abs(before[k - 1] - c0)):
+                k += 1
+            before = before[k:]
         return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
                     and self._pinned(kink, own))
 

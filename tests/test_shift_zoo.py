@@ -320,3 +320,15 @@ def test_a_flat_longer_than_the_dead_zone_in_one_line_with_it_does_not_hide_the_
     r = detect()
     assert r.start_outside and r.edge == "pos"
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_stiction_bursts_tail_at_a_slack_start_does_not_hide_a_short_dead_zone_flat():
+    # design replay 3900103 (a spiky plant shifted +5.84 deg; examined in stop 33): from rest in
+    # the dead zone the knob moves negative; a 192-mA stiction burst decays over the first two
+    # readings (-64, -21 mA against the no-load level's -7) and a third (-9), three readings of
+    # flat are left before the negative edge, 2.6 deg from the start. Stop 32's code read the
+    # burst's tail as off the dead zone's level, refused the short flat, and ran out of replay
+    case, detect = _detect(3900103)
+    r = detect()
+    assert r.edge == "neg" and r.evidence.n_before < shift.AFTER_STEPS
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
