@@ -644,11 +644,19 @@ def _edge_at(q, c, d, x, pcs, slopes, j, sig, *, minlen, resolution, strict_flat
     # the kink is searched over the whole flat stretch and the loaded piece: noise can split off
     # a short flat piece just past the true edge (a one-step drop, then a level pair of
     # readings), and a search near the segmentation's break would then sit degrees late
-    lo_b, hi_b = a0, pcs[j + 1][1] - 1
+    hi = q[min(pcs[j + 1][1] - 1, stop - 1)]
     # a stiffening loaded side needs its quadratic term, and enough points to carry it
     curved = stop - pcs[j + 1][0] >= 10
-    kink = kink_fit(q[a0:stop], c[a0:stop], d, lo=q[max(lo_b, a0)], hi=q[min(hi_b, stop - 1)],
-                    curved=curved, min_side=max(2, minlen // 2), resolution=resolution, convex=convex)
+
+    def fit(a: int) -> Kink | None:
+        # the kink of the points from ``a`` (the flat's first) to the loaded run's end
+        return kink_fit(q[a:stop], c[a:stop], d, lo=q[a], hi=hi, curved=curved, min_side=max(2, minlen // 2),
+                        resolution=resolution, convex=convex)
+
+    def clear(k: Kink | None) -> bool:
+        return k is not None and k.clarity >= MIN_CLARITY and k.after > 0
+
+    kink = fit(a0)
     # the merge above tells a noise-split dead zone from an unloading by slope alone; one that
     # starts at the reversal, with no held level before it (a drop law's tendon unloading at a
     # share of its loaded slope), passes for a tilted dead zone, and the two-line fit through it
@@ -657,16 +665,12 @@ def _edge_at(q, c, d, x, pcs, slopes, j, sig, *, minlen, resolution, strict_flat
     # fits the same take-up (its loaded slope within half) far better and flatter, it places
     # the kink. (The same loaded slope: a wall's kink after a soft take-up is another kink.)
     if first < j and kink is not None and not strict_flat:
-        own = pcs[j][0]
-        alone = kink_fit(q[own:stop], c[own:stop], d, lo=q[own], hi=q[min(hi_b, stop - 1)],
-                         curved=curved, min_side=max(2, minlen // 2), resolution=resolution, convex=convex)
-        if (alone is not None and alone.clarity >= MIN_CLARITY and alone.after > 0
-                and abs(alone.before) < abs(kink.before) and abs(alone.after - kink.after) <= 0.5 * kink.after
+        alone = fit(pcs[j][0])
+        if (clear(alone) and abs(alone.before) < abs(kink.before)
+                and abs(alone.after - kink.after) <= 0.5 * kink.after
                 and kink.residual > MERGE_RESIDUAL * max(alone.residual, sig)):
             kink = alone
-    if kink is None or kink.clarity < MIN_CLARITY or kink.after <= 0:
-        return None
-    return kink
+    return kink if clear(kink) else None
 
 
 def _sxx(x: np.ndarray) -> float:
