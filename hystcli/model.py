@@ -517,6 +517,11 @@ class KnobIdentification:
     current_edge_pos, current_edge_neg : float or None
         Where the sweep's current showed a tendon taken up (deg of knob): the loading edges read
         the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
+    current_edge_pos_se, current_edge_neg_se : float or None
+        Their standard errors (deg), kept by a tip fit where the current's reading claims the edge
+        (not one only the record's first stretch showed). Where the tip fit cannot place an edge,
+        Algorithm 1 measures the offset from the current's, as the paper's identification (the
+        current's) would. A current-only identification keeps none: its edges are the current's.
     current_arrive_rising, current_arrive_falling : float or None
         Where, on the sweep's branches after a reversal, the unloading tendon's current arrived at
         the dead zone (deg): rising, the negative tendon; falling, the positive one. Kept as a
@@ -548,6 +553,8 @@ class KnobIdentification:
     no_load_falling: float | None = None
     current_edge_pos: float | None = None
     current_edge_neg: float | None = None
+    current_edge_pos_se: float | None = None
+    current_edge_neg_se: float | None = None
     current_arrive_rising: float | None = None
     current_arrive_falling: float | None = None
     unfixed: tuple[str, ...] = ()
@@ -562,6 +569,10 @@ class KnobIdentification:
         if bad:
             raise ModelError(f"identification: unfixed names {', '.join(bad)}; only {', '.join(UNFIXABLE)} "
                              "can be left unfixed")
+        for name in ("current_edge_pos_se", "current_edge_neg_se"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v >= 0):
+                raise ModelError(f"identification: {name} must be a non-negative number of deg, got {v!r}")
         cog = (self.cogging_period, self.cogging_sin, self.cogging_cos)
         if any(v is not None for v in cog):
             # the search takes the ripple out of every reading: half a ripple, or a period that
@@ -576,7 +587,8 @@ class KnobIdentification:
                 raise ModelError("identification: cogging_sin and cogging_cos must be finite")
 
     OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
-                "current_edge_pos", "current_edge_neg", "current_arrive_rising", "current_arrive_falling",
+                "current_edge_pos", "current_edge_neg", "current_edge_pos_se", "current_edge_neg_se",
+                "current_arrive_rising", "current_arrive_falling",
                 "cogging_period", "cogging_sin", "cogging_cos")
     """Fields a model file may leave out (older files have none of them but the first)."""
 

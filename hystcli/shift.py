@@ -85,7 +85,7 @@ from __future__ import annotations
 
 import math
 import os
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Callable, Iterable, Mapping, Protocol, Sequence
 
 import numpy as np
@@ -127,6 +127,13 @@ UNPLACED_AGREE = 2.0
 """Largest disagreement (deg) between the offset the loading edge gives and the one a tendon taken
 up at an edge the identification could not place gives (against where the sweep's current put
 that edge), when a search meets both."""
+
+CURRENT_AGREE = 0.5
+"""Largest disagreement (deg) between the sweep's current and the tip fit on the edge the tip fit
+placed, for the current's reading of the edge it could not place to stand in for it
+(:func:`_edges_by_current`). Design replays 0-999, 3700000-499, 3900000-499: 9 such edges agreed
+within 0.18 deg and gave right offsets; the one whose current put its other edge 9 deg off had
+no current reading of the placed edge to agree with."""
 
 TAUT_BEFORE, WALL_AFTER = 1.5, 2.5
 """A kink whose readings before climb more than TAUT_BEFORE times the sweep's dead-zone slope and
@@ -589,6 +596,11 @@ class ShiftResult:
         The edge the search went for lay beyond reach, and the offset came from the one behind it,
         read on the walk back: from a taut start, the edge of the tendon the search had left; from
         a start in the dead zone, the edge on its other side.
+    reference : str
+        What the offset is measured from: ``"model"``, the model's ``d_pos``/``d_neg``; or
+        ``"current"``, where the identification sweep's current showed the edge
+        (``KnobIdentification.current_edge_pos``/``_neg``), for an edge the tip fit could not
+        place. The offset is the paper's either way: the shift of the edge the motor current shows.
     eps_lower, eps_upper, step : float
         The thresholds (mA/deg) and unit step (deg) used.
     evidence : Evidence or None
@@ -613,6 +625,7 @@ class ShiftResult:
     start_outside: bool = False
     returned: bool = True
     walked_back: bool = False
+    reference: str = "model"
     eps_lower: float = math.nan
     eps_upper: float = math.nan
     step: float = math.nan
@@ -627,6 +640,7 @@ class ShiftResult:
             "transition": self.transition, "start": self.start, "travel": self.travel,
             "steps": self.steps, "contacts": list(self.contacts),
             "start_outside": self.start_outside, "returned": self.returned, "walked_back": self.walked_back,
+            "reference": self.reference,
             "eps_lower": self.eps_lower, "eps_upper": self.eps_upper, "step": self.step,
             "evidence": None if self.evidence is None else self.evidence.to_dict(),
         }
@@ -1654,13 +1668,19 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
                        -1: math.inf if "b_pos" in unfixed else km.b_pos}
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
+    by_current = _edges_by_current(km, ident)
+    for d, (at, se) in by_current.items():
+        search.edges[d], search.model_se[d] = at, se
+    if by_current:
+        search.th = replace(th, unfixed=tuple(u for u in th.unfixed
+                                              if u not in {"d_pos" if d > 0 else "d_neg" for d in by_current}))
     start = search.start
     try:
         kind, kink = search.run()
         d = search.dir
         if kind == LOAD:
             edge = "pos" if d > 0 else "neg"
-            offset = kink.at - (km.d_pos if edge == "pos" else km.d_neg)
+            offset = kink.at - search.edges[d]
             # An edge the identification could not place on the tip still has where the sweep's
             # current showed it taken up (read the way the search reads it). A shift moves both
             # edges by one offset: a search that met that edge too must find it moved by the
@@ -1704,9 +1724,38 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         edge=edge, edge_found_at=float(kink.at), direction=int(d), transition=transition,
         start=start, travel=float(search.travel), steps=int(search.steps),
         contacts=tuple(float(c) for c in search.contacts), start_outside=search.start_outside,
-        walked_back=search.back is not None,
+        walked_back=search.back is not None, reference="current" if d in by_current else "model",
         returned=returned, eps_lower=th.eps_lower, eps_upper=th.eps_upper, step=float(step),
         evidence=ev, trace=tuple(search.trace))
+
+
+def _edges_by_current(km: KnobModel, ident) -> dict[int, tuple[float, float]]:  # noqa: ANN001
+    """{direction: (edge, standard error)} for each edge a tip fit could not place and the
+    sweep's current did (its reading claims it, with a standard error), where the current's
+    reading of the other edge, which the tip fit did place, agrees with it
+    (:data:`CURRENT_AGREE`).
+
+    A tip sampled too coarsely for its dead-zone corner, or a loop the record cannot tell apart,
+    leaves the tip fit's edge unplaced, and an offset from it means nothing; the motor current of
+    the same sweep may show the tendon taken up clearly. That edge, read the way Algorithm 1
+    reads the search's own kink, is the paper's D (its identification is the current's): the
+    offset is measured from it (design replays 471, 730, 831: the tip fit's d_pos 6 to 9 deg off,
+    the current's within 0.04). The other edge vouches for the current's reading: a wall plant's
+    current put d_neg at +7.65 deg, above the tip's d_pos, where the truth was -1.83 (design
+    replay 3900335), and with both edges unplaced nothing vouches for it (255: both current
+    edges right, the search's kink 4.9 deg early). A current-only identification that left an
+    edge unplaced had the current's own reason, and keeps no standard errors for these."""
+    if ident is None:
+        return {}
+    edges = {1: ("d_pos", km.d_pos, ident.current_edge_pos, ident.current_edge_pos_se),
+             -1: ("d_neg", km.d_neg, ident.current_edge_neg, ident.current_edge_neg_se)}
+    out = {}
+    for d, (name, _, at, se) in edges.items():
+        other, tip_other, at_other, _ = edges[-d]
+        if (name in ident.unfixed and other not in ident.unfixed and at is not None and se is not None
+                and at_other is not None and abs(at_other - tip_other) <= CURRENT_AGREE):
+            out[d] = (float(at), float(se))
+    return out
 
 
 def detect_shifts(model: Model, probes: Mapping[int, Any], **options: Any) -> dict[int, ShiftResult]:

@@ -162,3 +162,26 @@ def test_the_readme_walk_through_steps_1_and_2(tmp_path):
     assert res.exit_code == 0, res.output
     k0, k1 = load_model(mp).knob(1), load_model(out).knob(1)
     assert abs(k1.offset + k0.d_pos - 46.25) <= 0.6
+
+
+def test_an_offset_from_the_sweeps_current_says_so(tmp_path):
+    # zoo design plant 730 (examined in stop 34): its straight sweep's tip fit cannot place
+    # d_pos, its current does; through the CLI as a user runs it, identify then detect-shift
+    from hystcli.zoo import plants
+
+    case = plants.replay_case(730)
+    (tmp_path / "sweep.csv").write_text(case.straight_sweep.csv_text())
+    (tmp_path / "replay.csv").write_text(case.replay.csv_text())
+    mp = tmp_path / "model.json"
+    res = runner.invoke(app, ["identify", str(tmp_path / "sweep.csv"), "-o", str(mp), "-q"])
+    assert res.exit_code == 0, res.output
+    ident = load_model(mp).identification[1]
+    assert "d_pos" in ident.unfixed and ident.current_edge_pos_se is not None
+    res = invoke("-m", mp, "--replay", tmp_path / "replay.csv", "-o", tmp_path / "shifted.json")
+    assert res.exit_code == 0, res.output
+    assert "offset from d_pos as the sweep's current showed it" in res.stdout
+    res = invoke("-m", mp, "--replay", tmp_path / "replay.csv", "-o", tmp_path / "shifted2.json",
+                 "--format", "json")
+    r = json.loads(res.stdout)["knobs"]["1"]
+    assert r["reference"] == "current" and r["edge"] == "pos"
+    assert r["offset"] == pytest.approx(case.offset, abs=0.5)

@@ -293,8 +293,10 @@ def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
     ({"cogging_period": 0.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
     ({"cogging_period": -3.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
     ({"cogging_period": 4.0, "cogging_sin": 1.0}, "go together"),
+    ({"current_edge_pos_se": -0.1}, "current_edge_pos_se must be a non-negative"),
+    ({"current_edge_neg_se": "wide"}, "current_edge_neg_se"),
 ])
-def test_a_bad_cogging_ripple_in_a_model_file_is_one_clear_error(tmp_path, fields, message):
+def test_a_bad_identification_field_in_a_model_file_is_one_clear_error(tmp_path, fields, message):
     import json
 
     p = tmp_path / "m.json"
@@ -304,6 +306,17 @@ def test_a_bad_cogging_ripple_in_a_model_file_is_one_clear_error(tmp_path, field
     p.write_text(json.dumps(d))
     with pytest.raises(ModelError, match=message):
         load_model(p)
+
+
+def test_the_current_edges_standard_errors_round_trip_through_the_model_file(tmp_path):
+    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, current_edge_pos=4.77,
+                               current_edge_pos_se=0.04, unfixed=("d_pos",))
+    m = Model({1: KnobModel(11.7, -12.4, 25.7, 0.6, 1.45, -4.0, 4.2)}, identification={1: ident})
+    p = tmp_path / "m.json"
+    save_model(p, m)
+    back = load_model(p).identification[1]
+    assert (back.current_edge_pos, back.current_edge_pos_se, back.current_edge_neg_se) == (4.77, 0.04, None)
+    assert "current_edge_neg_se" not in p.read_text()
 
 
 def test_an_unfixed_backlash_round_trips_through_the_model_file(tmp_path):

@@ -528,6 +528,40 @@ def test_an_unplaced_edge_met_on_the_way_must_agree_with_the_placed_one():
         assert r.edge == "neg" and r.offset == pytest.approx(0.0, abs=0.25), seed
 
 
+def test_an_edge_the_tip_fit_could_not_place_is_measured_from_where_the_current_showed_it():
+    # The tip fit could not place d_pos (its 15 deg is a guess: a tip sampled too coarsely for
+    # its dead-zone corner), but the sweep's current showed the positive tendon taken up at 6.0,
+    # +-0.05 (its reading claims it), and the negative one at -4.8, where the tip fit placed
+    # d_neg (-5.0, within CURRENT_AGREE). The dead zone has shifted by +2: [-3, 8]. The search
+    # moves positive and takes the tendon up at 8: the offset is 8 - 6 = +2, measured from the
+    # current's edge. Without the reading's standard error (an older model file, or an edge only
+    # the record's first stretch showed), or with the current's d_neg 0.8 deg off the tip's,
+    # that edge gives none: the search crosses the dead zone and measures the same +2 from the
+    # negative edge, -3 - (-5).
+    def ident_model(se: float | None, current_neg: float | None = -4.8) -> Model:
+        km = KnobModel(d_pos=15.0, d_neg=-5.0, b_pos=3.0, b_neg=3.0, omega=1.45, h_pos=-2.0, h_neg=2.0)
+        return Model({1: km}, identification={1: KnobIdentification(
+            0.5, 4.0, -40.0, 40.0, current_dead_zone=120.0, no_load_rising=126.0, no_load_falling=114.0,
+            unfixed=("d_pos",), current_edge_pos=6.0, current_edge_pos_se=se, current_edge_neg=current_neg,
+            stderr={"d_neg": 0.05})})
+
+    law = tendons(-3.0, 8.0)
+    for seed in range(4):
+        r = detect_shift(ident_model(0.05), Knob(law, seed=seed), 1)
+        assert (r.edge, r.reference) == ("pos", "current"), seed
+        assert r.offset == pytest.approx(2.0, abs=0.25), seed
+        # the shifted model moves the tip fit's edges by that offset (its d_pos stays a guess)
+        assert r.d_neg == pytest.approx(-3.0, abs=0.25) and r.d_pos == pytest.approx(17.0, abs=0.25)
+        r = detect_shift(ident_model(None), Knob(law, seed=seed), 1)
+        assert (r.edge, r.reference) == ("neg", "model"), seed
+        assert r.offset == pytest.approx(2.0, abs=0.25), seed
+    # a current edge known only to +-1.5 deg (beyond MAX_MODEL_SE) gives no offset either, nor
+    # one whose reading of the placed edge is 0.8 deg off it or missing
+    for m in (ident_model(1.5), ident_model(0.05, -5.8), ident_model(0.05, None)):
+        r = detect_shift(m, Knob(law, seed=0), 1)
+        assert (r.edge, r.reference) == ("neg", "model")
+
+
 # --------------------------------------------------------------------------------------------
 # a taut start's whole unloading in the stretch the search reads
 # --------------------------------------------------------------------------------------------

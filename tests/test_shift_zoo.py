@@ -332,3 +332,40 @@ def test_a_stiction_bursts_tail_at_a_slack_start_does_not_hide_a_short_dead_zone
     r = detect()
     assert r.edge == "neg" and r.evidence.n_before < shift.AFTER_STEPS
     assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+@pytest.mark.parametrize("seed", [730, 831, 3900371])
+def test_an_edge_the_tip_fit_could_not_place_is_measured_from_the_sweeps_current(seed):
+    # design replays examined in stop 34: each straight sweep's tip fit left d_pos unplaced (its
+    # guess 1.4 to 9 deg off the plant's), its current showed the edge within 0.04 deg and d_neg
+    # within 0.17 of the tip fit's, and the replay's only readable edge was the positive one.
+    # Measured from the model's guess there was no offset to give (a refusal); from the
+    # current's edge it is right.
+    case, detect = _detect(seed)
+    model, _ = straight_model(case)
+    ident = model.identification[1]
+    assert "d_pos" in ident.unfixed and ident.current_edge_pos_se is not None
+    assert abs(ident.current_edge_pos - case.truth.d_pos) < 0.1
+    r = detect()
+    assert (r.edge, r.reference) == ("pos", "current")
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+@pytest.mark.parametrize("seed", [255, 3900335, 471])
+def test_a_current_edge_nothing_vouches_for_gives_no_offset(seed):
+    # 255 and 471: both edges unplaced by the tip fit (the search's kink on 255 lies 4.9 deg
+    # early); 3900335: the current put d_neg at +7.65 deg, the truth -1.83, and read no d_pos to
+    # compare with the tip fit's. Measured from those current edges 255 and 3900335 came back
+    # 4.9 and 9.5 deg off at exit 0 (471 right by luck): now no offset from them.
+    r = _right_or_refused(seed)
+    assert r is None or r.reference == "model"
+
+
+def test_a_current_only_identification_keeps_no_current_edge_standard_errors():
+    # its edges are the current's: an edge it left unplaced had the current's own reason
+    from hystcli.identify import identify
+
+    case = plants.replay_case(730)
+    run = parse_run(case.straight_sweep.csv_text(), source="straight-730")
+    ident = identify(run, use_tip=False).model.identification[1]
+    assert ident.current_edge_pos_se is None and ident.current_edge_neg_se is None

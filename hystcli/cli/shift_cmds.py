@@ -67,6 +67,8 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
             notes.append("the edge it went for out of reach: walked back across the dead zone to the other")
         if r.contacts:
             notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
+        if r.reference == "current":
+            notes.append(f"offset from d_{r.edge} as the sweep's current showed it (the tip fit could not place it)")
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
         ev = r.evidence
         se = f"{ev.edge_se:5.2f}" if ev is not None else f"{'-':>5}"

@@ -521,10 +521,21 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         current_noise=noise, no_load_rising=no_rise, no_load_falling=no_fall,
         current_edge_pos=None if reading is None else reading.edges.get("pos"),
         current_edge_neg=None if reading is None else reading.edges.get("neg"),
+        current_edge_pos_se=None if fit is None else _claimed_se(reading, "pos"),
+        current_edge_neg_se=None if fit is None else _claimed_se(reading, "neg"),
         current_arrive_rising=None if reading is None else reading.arrivals.get(1),
         current_arrive_falling=None if reading is None else reading.arrivals.get(-1), unfixed=unfixed,
         cogging_period=None if ripple is None else ripple.period,
         cogging_sin=None if ripple is None else ripple.sin, cogging_cos=None if ripple is None else ripple.cos)
+
+
+def _claimed_se(reading: CurrentReading | None, side: str) -> float | None:
+    """The standard error of the current's edge on ``side`` where its reading claims it: not an
+    edge only the record's first stretch showed (whose start state the current cannot tell)."""
+    if reading is None or side in reading.first_only or side not in reading.edges_se:
+        return None
+    se = float(reading.edges_se[side])
+    return se if math.isfinite(se) else None
 
 
 def _dead_zone_slope(q: np.ndarray, c: np.ndarray, chk: SweepCheck, lo: float, hi: float) -> float:
