@@ -74,6 +74,9 @@ real current is not one law:
   the way (an edge a step or two from the start, or one too faint or too unsure to take) crosses
   the dead zone to the other edge, as from a taut start; so does one whose edge the model cannot
   give an offset from (unplaced, or too uncertain).
+* **what an offset is measured from.** The model's ``d_pos``/``d_neg``; for an edge a tip fit
+  could not place, where the sweep's current showed it, when the current also read the other
+  edge where the tip fit placed it (:func:`_edges_by_current`; the result's ``reference``).
 * **the motor's cogging.** Where the identification sweep's dead zone showed a cogging ripple
   (periodic in the knob angle, the same either way it turns:
   :func:`hystcli.current.cogging_ripple`), every reading has it taken out before it is judged: a
@@ -1739,8 +1742,8 @@ def _edges_by_current(km: KnobModel, ident) -> dict[int, tuple[float, float]]:  
     leaves the tip fit's edge unplaced, and an offset from it means nothing; the motor current of
     the same sweep may show the tendon taken up clearly. That edge, read the way Algorithm 1
     reads the search's own kink, is the paper's D (its identification is the current's): the
-    offset is measured from it (design replays 471, 730, 831: the tip fit's d_pos 6 to 9 deg off,
-    the current's within 0.04). The other edge vouches for the current's reading: a wall plant's
+    offset is measured from it (design replays 730, 831, 3900371: the tip fit's d_pos 1.4 to 9.4
+    deg off, the current's within 0.02). The other edge vouches for the current's reading: a wall plant's
     current put d_neg at +7.65 deg, above the tip's d_pos, where the truth was -1.83 (design
     replay 3900335), and with both edges unplaced nothing vouches for it (255: both current
     edges right, the search's kink 4.9 deg early). A current-only identification that left an
