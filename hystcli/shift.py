@@ -1661,22 +1661,22 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, eps_lower: float | 
         if not (math.isfinite(margin) and margin > 0):
             raise ShiftDetectionError(f"the level margin must be a positive number of mA, got {level_margin}")
 
+    ident = model.identification.get(k)
+    # edges the tip fit could not place that the sweep's current did: no longer unplaced for the search
+    by_current = _edges_by_current(km, ident)
+    placed = {"d_pos" if d > 0 else "d_neg" for d in by_current}
+    th = replace(th, unfixed=tuple(u for u in th.unfixed if u not in placed))
     search = _Search(probe, k, th, float(step), int(max_steps), float(max_travel), int(direction), margin,
                      progress)
     search.edges = {1: km.d_pos, -1: km.d_neg}
-    ident = model.identification.get(k)
     # a backlash the sweep could not fix (kept as 0 deg) bounds no plateau: any flat may be one
     unfixed = () if ident is None else ident.unfixed
     search.backlash = {1: math.inf if "b_neg" in unfixed else km.b_neg,
                        -1: math.inf if "b_pos" in unfixed else km.b_pos}
     if ident is not None and ident.stderr:
         search.model_se = {1: float(ident.stderr.get("d_pos", 0.0)), -1: float(ident.stderr.get("d_neg", 0.0))}
-    by_current = _edges_by_current(km, ident)
     for d, (at, se) in by_current.items():
         search.edges[d], search.model_se[d] = at, se
-    if by_current:
-        search.th = replace(th, unfixed=tuple(u for u in th.unfixed
-                                              if u not in {"d_pos" if d > 0 else "d_neg" for d in by_current}))
     start = search.start
     try:
         kind, kink = search.run()
