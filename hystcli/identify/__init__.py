@@ -67,6 +67,11 @@ residual: the record holds both loops, and the edge is not claimed."""
 SLIDES_WITH = {"d_pos": ("d_pos", "h_pos", "b_pos", "b_neg"), "d_neg": ("d_neg", "h_neg", "b_pos", "b_neg")}
 """Parameters that move with an edge the record cannot place (its flat too narrow to see)."""
 
+FROM_CURRENT = (" (only from where the sweep's current showed that tendon taken up, when the current also "
+                "read the other edge where the tip fit placed it)")
+"""What Algorithm 1 does with an edge a tip fit could not place (:func:`hystcli.shift._edges_by_current`),
+as identify's warnings say it."""
+
 
 def systematic_misfit(resid: np.ndarray, fs: float) -> float:
     """RMS of the residuals averaged over a quarter second: the noise averages out, a part of the
@@ -313,7 +318,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
             tied = SLIDES_WITH[name]
             warnings.append(f"{where_k}: {name} is not fixed by this record ({why}); the model predicts the "
                             f"tip, but {', '.join(tied)} are left without an uncertainty and Algorithm 1 "
-                            "will not use this edge")
+                            f"takes no offset from this {name}{FROM_CURRENT}")
             for name_tied in tied:
                 stderr.pop(name_tied, None)
         if bootstrap > 0:
@@ -336,7 +341,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
                                         f"; a loop with the edge at {getattr(alt, name):.2f} deg fits the tip as well "
                                         f"(RMS {rms_alt:.3f} against {rms_fit:.3f} deg): the record cannot tell them "
                                         f"apart, so {', '.join(SLIDES_WITH[name])} are left without an uncertainty "
-                                        "and Algorithm 1 will not use this edge" if ambiguous else ""))
+                                        f"and Algorithm 1 takes no offset from this {name}{FROM_CURRENT}"
+                                        if ambiguous else ""))
                     if ambiguous:
                         for tied in SLIDES_WITH[name]:
                             stderr.pop(tied, None)
