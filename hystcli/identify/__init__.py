@@ -10,7 +10,9 @@ This package owns DESIGN.md sections 3-4 seen from the data side:
   cannot fix instead of returning it;
 * :mod:`.current` reads the motor current: the loading edges where a tendon is taken up (a jump
   in slope, not a flat stretch, so pretensioned tendons work), the backlash plateau when the
-  current shows one, the levels and slopes Algorithm 1 needs.
+  current shows one, the levels and slopes Algorithm 1 needs. Where the dead zone that reading
+  bounds carries the motor's cogging ripple, the current is read again with it taken out
+  (:func:`_read_without_cogging`).
 
 :func:`identify` puts them together per knob. With a measured tip angle the tip fit decides the
 model and the current only gives Algorithm 1's levels; with the current alone (the paper's
@@ -256,6 +258,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
     c = conditioned_current(run, k, filter_hz)
     reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz)) if c is not None else None
+    reading = _read_without_cogging(q, c, t, chk, reading, ringing_time(filter_hz))
     warnings: list[str] = []
     ambiguous_edges: list[str] = []
     where_k = f"{where}knob {k}"
@@ -535,6 +538,59 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         cogging_sin=None if ripple is None else ripple.sin, cogging_cos=None if ripple is None else ripple.cos)
 
 
+REREAD_PERIODS = 3.0
+"""Fewest periods of a cogging ripple the first reading's dead zone must span before the current
+is read again without it. Cogging repeats with the motor shaft; a dead zone whose current bends
+once across it (a stiffening cable, a wall's approach) fits a wave of one or two periods as well
+(design sweeps 3900274 and 3900435: a 7-deg "ripple" of 12 mA over an 11-deg dead zone, and a
+13.8-deg one of 15 mA over 26 deg; taken out, their right edges were lost). The zoo's cogging
+(bench/zoo.py, coulomb-viscous plants) has periods of 0.5-5 deg."""
+
+
+def _read_without_cogging(q: np.ndarray, c: np.ndarray | None, t: np.ndarray, chk: SweepCheck,
+                          reading: CurrentReading | None, ring_s: float) -> CurrentReading | None:
+    """The sweep's current read again with the motor's cogging taken out, when its dead zone shows one.
+
+    The motor's cogging ripple is periodic in the knob angle and rides on every reading: its
+    crest beside an edge reads as a dead zone curving into it, its trough after a reversal as a
+    flat that looks like a backlash plateau (design sweep 566, a current that follows the
+    tendon's stretch: b_neg 1.98 +- 0.38 returned against 13.05). The first reading bounds the
+    dead zone (its edges, or where a stretch showed a kink it did not keep); the ripple is read
+    there (:func:`hystcli.current.cogging_ripple`), past any plateau the first reading saw, and
+    when one spans :data:`REREAD_PERIODS` periods the current is read again without it.
+    Otherwise the first reading is returned as it is. The stored levels (:func:`_levels`) keep
+    reading the ripple themselves, for detect-shift to take out of its readings.
+    """
+    if reading is None or c is None:
+        return reading
+    # the dead zone as the first reading bounds it: its edges, or where some stretch showed a
+    # kink the reading did not keep (a ripple's crest before the edge makes it look like a curve)
+    bound = {}
+    for side, d in (("pos", 1), ("neg", -1)):
+        kinks = [s.edge.at for s in reading.stretches if s.edge is not None and s.direction == d]
+        bound[side] = reading.edges.get(side, float(np.median(kinks)) if kinks else None)
+    if bound["pos"] is None or bound["neg"] is None:
+        return reading
+    lo, hi = bound["neg"] + 0.5, bound["pos"] - 0.5
+    if hi - lo < 2.0:
+        return reading
+    dq = np.gradient(q, t) if t.size > 1 else np.zeros_like(q)
+    slack = (q > lo) & (q < hi) & (dq != 0)
+    # after a reversal the tendon may hold its load over the backlash: those samples are not flat
+    for i, (a, b, d) in enumerate(chk.segments):
+        if i == 0:
+            continue
+        width = reading.backlash.get("pos" if d < 0 else "neg")
+        if width is not None:
+            slack[a:b + 1] &= (q[a:b + 1] - q[a]) * d > width + 0.5
+    if slack.sum() < 60:
+        return reading
+    ripple = cogging_ripple(q[slack], c[slack], (dq[slack] < 0).astype(int))
+    if ripple is None or ripple.period * REREAD_PERIODS > hi - lo:
+        return reading
+    return read_current(q, c - ripple(q), t, chk, ring_s=ring_s)
+
+
 def _claimed_se(reading: CurrentReading | None, side: str) -> float | None:
     """The standard error of the current's edge on ``side`` where its reading claims it: not an
     edge only the record's first stretch showed (whose start state the current cannot tell)."""
@@ -644,4 +700,5 @@ def current_levels(run: Run, knob: int, model: KnobModel, filter_hz: float | Non
     t = np.asarray(run["t"], float)
     c = condition(np.asarray(run[f"c{k}"], float), run.sample_rate, filter_hz)
     reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz))
+    reading = _read_without_cogging(q, c, t, chk, reading, ringing_time(filter_hz))
     return _levels(q, c, t, model, None, reading, chk, None, {})
