@@ -27,7 +27,7 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..current import cogging_ripple, condition
+from ..current import RIPPLE_SHORTEST, cogging_ripple, condition
 from ..errors import IdentificationError, ModelError
 from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
@@ -572,8 +572,8 @@ def _read_without_cogging(q: np.ndarray, c: np.ndarray | None, t: np.ndarray, ch
     if bound["pos"] is None or bound["neg"] is None:
         return reading
     lo, hi = bound["neg"] + 0.5, bound["pos"] - 0.5
-    if hi - lo < 2.0:
-        return reading
+    if hi - lo < REREAD_PERIODS * RIPPLE_SHORTEST:
+        return reading          # no ripple the search reads could span enough periods
     dq = np.gradient(q, t) if t.size > 1 else np.zeros_like(q)
     slack = (q > lo) & (q < hi) & (dq != 0)
     # after a reversal the tendon may hold its load over the backlash: those samples are not flat
