@@ -497,6 +497,11 @@ def test_no_wall_on_a_free_loop_or_a_dead_zone_flat():
     # fewer than half of the loaded reversals is not one (before: b_neg 5.97 returned against
     # 2.44; b_pos now shows after one of three reversals, and the reading stops there)
     (294, "stretch", "b_pos"),
+    # a stiffening cable on a stretch law (held-out 4100412, looked at after that range's figures):
+    # from the negative reversal the current falls back down its own stiffening curve, steeply
+    # and then gentler, and stop 35's first code read that as the sheath's flip over a backlash,
+    # b_neg 9.49 +- 0.44 (RETRACE)
+    (4100412, "stiffening", "b_neg"),
 ])
 def test_current_only_does_not_read_a_backlash_the_current_does_not_hold(seed, family, name):
     from hystcli.io import parse_run
@@ -1232,3 +1237,4 @@ def test_a_dead_zone_that_bends_over_two_periods_is_not_read_as_cogging():
     # its d_pos (18.65 against 15.04) only the record's first stretch shows: an estimate, unclaimed
     assert "d_pos" not in fit.stderr
     _assert_within(fit, case.truth, ("d_neg",), tol=0.1)
+

@@ -20,7 +20,9 @@ is (DESIGN.md section 4):
   unloading is read from the unloading back (:func:`_held_plateau`), up to :data:`HELD_RATIO`
   times it; its end is placed by a two-line fit, like an edge (:func:`_refine_end`). A fall
   read as the flip needs an unloading after it clearly steeper than the dead zone: one no steeper
-  is the dead zone's tilt, and the "flip" the unloading itself (:data:`TILT_UNLOAD`). After a
+  is the dead zone's tilt, and the "flip" the unloading itself (:data:`TILT_UNLOAD`); and it must
+  fall more steeply than the load rose just before the reversal: no steeper, it is that load
+  coming back down its own curve (a stiffening cable, :data:`RETRACE`). After a
   step at the reversal (a force dropped at once), a held plateau must go on for a degree past the
   conditioning low-pass's ringing (:func:`_ring_until`), which lies level for a while too.
 * the **levels**: the no-load current of each direction (the motor's Coulomb friction moves it
@@ -143,6 +145,7 @@ class Stretch:
     end_slope: float | None = None
     resolution: float = 0.5
     plateau_se: float | None = None
+    fall_slope: float | None = None
 
 
 @dataclass(frozen=True)
@@ -261,7 +264,7 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
                         min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
-    plateau, held, plateau_se = None, False, None
+    plateau, held, plateau_se, fall_slope = None, False, None, None
     # from the reversal on (the slow start included), up to the next reversal's own rounding: a
     # drop at that reversal, spread backward by a zero-phase filter, would take one of the pieces
     # the plateau, the unloading, the dead zone and the loading need
@@ -283,16 +286,22 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
             # kink, placed like an edge (design seeds 0-1799: median error 0.062 -> 0.022 deg,
             # returned more than 1 deg off 6 -> 2, 2-sigma coverage 95.6 -> 98.2 %)
             plateau, plateau_se = _refine_end(xp, vp, plateau, span, width)
+            if not held:
+                # how steeply the current fell over the flip, past the motor's own flip
+                m = (xp >= slow_until) & (xp <= plateau)
+                if m.sum() >= 3:
+                    fall_slope = d * float(np.polyfit(xp[m], vp[m], 1)[0])
     # the slope over the stretch's last END_TRAVEL deg (least squares on the bins): what the
     # load did just before the next reversal
     last = xa >= xa[-1] - END_TRAVEL if xa.size else xa.astype(bool)
     end_slope = float(np.polyfit(xa[last], va[last], 1)[0]) if last.sum() >= 4 else None
     if kink is None:
         return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival, plateau_held=held,
-                       end_slope=end_slope, resolution=width, plateau_se=plateau_se)
+                       end_slope=end_slope, resolution=width, plateau_se=plateau_se, fall_slope=fall_slope)
     return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
                    dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival,
-                   plateau_held=held, end_slope=end_slope, resolution=width, plateau_se=plateau_se)
+                   plateau_held=held, end_slope=end_slope, resolution=width, plateau_se=plateau_se,
+                   fall_slope=fall_slope)
 
 
 TILT_UNLOAD = 1.5
@@ -307,6 +316,16 @@ silent failures right, the wrong backlash of 1945 and 2657 (walls) no longer cla
 else changed; the twin's sheath flip (its unloading at the loaded slope, its dead zone flat) is
 untouched (test_current_only_recovers_edges_and_backlash). A wall's elastic fall back is not
 this (:data:`ELASTIC_TOP`)."""
+
+RETRACE = 1.5
+"""A fall read as the sheath friction's flip (:func:`_plateau`) must be steeper than this many
+times the slope the load rose with just before the reversal (the previous stretch's end slope):
+a current that follows the tendon comes back down the curve it went up, and a stiffening cable's
+curve is steep at the top and gentler toward the edge, as a flip followed by the unloading looks
+(held-out 4100412, a stretch law: b_neg 9.49 +- 0.44 read off that fall; design sweep 3600272,
+b_pos 2.94). A sheath's flip falls at least :data:`FLIP` times the unloading after it, which on
+a straight cable is the slope the load rose with. Design sweeps 0-2999 and 3500000-4100499,
+current only, per record: those two right, nothing else changed. 1.5 is the one value tried."""
 
 FLIP = 2.0
 """A fall at least this many times the unloading slope over the backlash is the sheath friction
@@ -710,7 +729,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
             ref = loaded_ref if math.isfinite(loaded_ref) else (prev.loaded_slope if prev is not None else None)
             end = end_slopes[i - 1] if i > 0 else None
             elastic = (end is not None and ref is not None and d * end >= ELASTIC_TOP * max(ref, 1e-12))
-            return s.plateau_held or not elastic
+            # a fall no steeper than the load rose just before the reversal is that load coming
+            # back down its own curve, not the sheath friction flipping
+            retrace = (s.fall_slope is not None and end is not None
+                       and s.fall_slope <= RETRACE * max(d * end, 1e-12))
+            return s.plateau_held or not (elastic or retrace)
 
         kept = [s for i, s in enumerate(stretches[:-1]) if shown(i, s)]
         # the complete stretches after a loaded reversal (the one before took the tendon up past
