@@ -1237,4 +1237,3 @@ def test_a_dead_zone_that_bends_over_two_periods_is_not_read_as_cogging():
     # its d_pos (18.65 against 15.04) only the record's first stretch shows: an estimate, unclaimed
     assert "d_pos" not in fit.stderr
     _assert_within(fit, case.truth, ("d_neg",), tol=0.1)
-
