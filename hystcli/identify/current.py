@@ -129,6 +129,10 @@ class Stretch:
         Where the unloading tendon's current arrives at the dead zone (a stretch from a reversal).
     plateau_se : float or None
         Standard error of ``plateau`` from the two-line fit that placed its end (:func:`_refine_end`).
+    fall_slope : float or None
+        For a ``plateau`` read off a fall (not held): the current's slope over it, past the motor's
+        own flip (mA/deg, unloading-positive), which :data:`RETRACE` weighs against the slope the
+        load rose with before the reversal.
     """
 
     start: int
