@@ -257,8 +257,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float) if "t" in run else np.arange(q.size, dtype=float)
     c = conditioned_current(run, k, filter_hz)
-    reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz)) if c is not None else None
-    reading = _read_without_cogging(q, c, t, chk, reading, ringing_time(filter_hz))
+    reading = _read_without_cogging(q, c, t, chk, filter_hz) if c is not None else None
     warnings: list[str] = []
     ambiguous_edges: list[str] = []
     where_k = f"{where}knob {k}"
@@ -547,9 +546,11 @@ once across it (a stiffening cable, a wall's approach) fits a wave of one or two
 (bench/zoo.py, coulomb-viscous plants) has periods of 0.5-5 deg."""
 
 
-def _read_without_cogging(q: np.ndarray, c: np.ndarray | None, t: np.ndarray, chk: SweepCheck,
-                          reading: CurrentReading | None, ring_s: float) -> CurrentReading | None:
-    """The sweep's current read again with the motor's cogging taken out, when its dead zone shows one.
+def _read_without_cogging(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
+                          filter_hz: float | None) -> CurrentReading:
+    """The sweep's (conditioned) current read, and read again with the motor's cogging taken out
+    when its dead zone shows one (``filter_hz``: the low-pass that conditioned it, for
+    :func:`hystcli.identify.current.ringing_time`).
 
     The motor's cogging ripple is periodic in the knob angle and rides on every reading: its
     crest beside an edge reads as a dead zone curving into it, its trough after a reversal as a
@@ -561,8 +562,8 @@ def _read_without_cogging(q: np.ndarray, c: np.ndarray | None, t: np.ndarray, ch
     Otherwise the first reading is returned as it is. The stored levels (:func:`_levels`) keep
     reading the ripple themselves, for detect-shift to take out of its readings.
     """
-    if reading is None or c is None:
-        return reading
+    ring_s = ringing_time(filter_hz)
+    reading = read_current(q, c, t, chk, ring_s=ring_s)
     # the dead zone as the first reading bounds it: its edges, or where some stretch showed a
     # kink the reading did not keep (a ripple's crest before the edge makes it look like a curve)
     bound = {}
@@ -699,6 +700,5 @@ def current_levels(run: Run, knob: int, model: KnobModel, filter_hz: float | Non
     q = np.ascontiguousarray(run[f"q{k}"], dtype=float)
     t = np.asarray(run["t"], float)
     c = condition(np.asarray(run[f"c{k}"], float), run.sample_rate, filter_hz)
-    reading = read_current(q, c, t, chk, ring_s=ringing_time(filter_hz))
-    reading = _read_without_cogging(q, c, t, chk, reading, ringing_time(filter_hz))
+    reading = _read_without_cogging(q, c, t, chk, filter_hz)
     return _levels(q, c, t, model, None, reading, chk, None, {})
