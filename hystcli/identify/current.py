@@ -299,13 +299,10 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     # load did just before the next reversal
     last = xa >= xa[-1] - END_TRAVEL if xa.size else xa.astype(bool)
     end_slope = float(np.polyfit(xa[last], va[last], 1)[0]) if last.sum() >= 4 else None
-    if kink is None:
-        return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival, plateau_held=held,
-                       end_slope=end_slope, resolution=width, plateau_se=plateau_se, fall_slope=fall_slope)
-    return Stretch(start, stop, d, from_reversal, edge=kink, dead_level=kink.level,
-                   dead_slope=kink.before, loaded_slope=kink.after, plateau=plateau, arrival=arrival,
-                   plateau_held=held, end_slope=end_slope, resolution=width, plateau_se=plateau_se,
-                   fall_slope=fall_slope)
+    at_edge = ({} if kink is None else
+               dict(edge=kink, dead_level=kink.level, dead_slope=kink.before, loaded_slope=kink.after))
+    return Stretch(start, stop, d, from_reversal, plateau=plateau, arrival=arrival, plateau_held=held,
+                   end_slope=end_slope, resolution=width, plateau_se=plateau_se, fall_slope=fall_slope, **at_edge)
 
 
 TILT_UNLOAD = 1.5
