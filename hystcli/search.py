@@ -199,9 +199,20 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
     plans = [None if o or g.effect is None else E.Plan.of(base + (g.effect,)) for o, g in zip(null, grid)]
     steps = [None if pl is None else pl.signal_steps() for pl in plans]
     acts = acting(preps, etype, grid)
+    ident = [None if pl is None else {k: g.effect.type.identity_range(g.effect, k) for k in (1, 2)}
+             for pl, g in zip(plans, grid)]
+    ident = [None if r is None or all(v is None for v in r.values()) else r for r in ident]
+    widest = _widest(grid, ident)
+    # what a point does on each knob alone: points alike on a knob share its SSE there (the
+    # two-limit forms of a stop on a one-knob run, or on the knob whose limit they share)
+    keys = [None if pl is None else {k: g.effect.type.knob_key(g.effect, k) for k in (1, 2)}
+            for pl, g in zip(plans, grid)]
     for i, p in enumerate(preps):
         cuts: dict[str, tuple] = {}
         sigs = {k: p.signals(k) for k in p.knobs}
+        seen = {grid[j].form: _stage_input_range(p, plans[j], steps[j], grid[j].effect, ident[j], sigs)
+                for j in widest}
+        alike: dict = {}
         for j, g in enumerate(grid):
             if null[j] or not acts[i, j]:
                 T[i, j] = base_sse[i]
@@ -209,11 +220,76 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
             if g.effect is None:
                 T[i, j] = math.inf  # outside the domain
                 continue
+            rest = False
+            if ident[j] is not None and g.form in seen:
+                if _inside(seen[g.form], ident[j], 0, 1):
+                    T[i, j] = base_sse[i]  # the stage leaves this run alone: the base prediction
+                    continue
+                # at rest it hands the hysteresis the reading unchanged: what comes before it is
+                # the switched-off effect's, shared by every such point of the form
+                rest = _inside(seen[g.form], ident[j], 2, 2)
             try:
-                T[i, j] = _sse_from_cut(p, plans[j], steps[j], g.effect, cuts, sigs)
+                T[i, j] = _sse_from_cut(p, plans[j], steps[j], g.effect, cuts, sigs, rest,
+                                        None if keys[j] is None else (keys[j], alike))
             except ModelError:
                 T[i, j] = math.inf
     return T
+
+
+def _widest(grid: Sequence[GridPoint], ident: Sequence[Mapping[int, tuple] | None]) -> list[int]:
+    """For each form whose stage is the identity inside a range (a stop, a knee), the grid point
+    whose range is widest on its narrower knob: the plan that gives the stage's input on a run.
+    (A point that switches the effect off would not do: its plan leaves the stage out.)"""
+    best: dict[str, tuple[float, int]] = {}
+    for j, (g, r) in enumerate(zip(grid, ident)):
+        if r is None or any(v is None for v in r.values()) or g.effect.spec_form.stage != "output":
+            continue
+        width = min(v[1] - v[0] for v in r.values())
+        if math.isfinite(width) and (g.form not in best or width > best[g.form][0]):
+            best[g.form] = (width, j)
+    return [j for _, j in best.values()]
+
+
+def _stage_input_range(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, ranges: Mapping[int, tuple],
+                       sigs: Mapping) -> dict[int, tuple] | None:
+    """Per knob, the least and largest input ``eff``'s stage sees on run ``p`` (the value its
+    ``at_rest`` is handed included) and that value alone; None where ``eff`` at rest is not the
+    identity (``ranges``, its identity ranges) or an input is not finite. The stages before it
+    do not depend on its parameters but through that value, so a point of the form whose range
+    holds the first two predicts the run as the base does, and one whose range holds the value
+    at rest shares those stages' signals with ``eff``."""
+    stop = E.step_index(plan, eff)
+    if steps[stop][1] is not eff:
+        return None
+    out = {}
+    for k, kn in p.knobs.items():
+        v = E.rest_input(plan, eff, sigs[k].y0, sigs[k])
+        lo, hi = ranges[k]
+        if not (lo <= v <= hi):
+            return None
+        try:
+            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
+            z = E.run_signals(plan, knc, sigs[k], p.q[k], stop=stop, steps=steps)["z"]
+        except ModelError:
+            return None
+        if z.size == 0:
+            return None
+        lo, hi = min(float(np.min(z)), v), max(float(np.max(z)), v)
+        if not (math.isfinite(lo) and math.isfinite(hi)):
+            return None
+        out[k] = (lo, hi, v)
+    return out
+
+
+def _inside(seen: Mapping[int, tuple] | None, ranges: Mapping[int, tuple | None], lo: int, hi: int) -> bool:
+    """Whether, on every knob, ``seen[k][lo] .. seen[k][hi]`` lies inside ``ranges[k]``."""
+    if not seen:
+        return False
+    for k, s in seen.items():
+        r = ranges.get(k)
+        if r is None or not (r[0] <= s[lo] and s[hi] <= r[1]):
+            return False
+    return True
 
 
 def with_knobs(p: Prep, knobs: Mapping[int, KnobModel]) -> Prep:
@@ -238,26 +314,52 @@ def table_loops(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.nd
     return T
 
 
-def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict, sigs: dict) -> float:
+def _sse_from_cut(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict, sigs: dict,
+                  rest: bool = False, alike: tuple | None = None) -> float:
+    """The run's SSE under ``plan``, reusing what the chain computes before ``eff``'s stage
+    (``cuts``, per form and knob). ``rest``: ``eff``'s ``at_rest`` is the identity on this run
+    (:func:`table`), so even a static map's cut may lie after the hysteresis. ``alike``: the
+    point's knob keys and the run's SSE per knob and key so far (:meth:`EffectType.knob_key`)."""
     total = 0.0
     for k, kn in p.knobs.items():
-        sig = sigs[k]
-        if eff.spec_form.stage == "condition":
-            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
-            c = E.run_signals(plan, knc, sig, p.q[k], steps=steps)
-        else:
-            key = (eff.form, k)
-            if key not in cuts:
-                j = E.step_index(plan, eff)
-                if type(eff.type).at_rest is not EffectType.at_rest:
-                    # its static map sets the hysteresis' start: reuse only what comes before it
-                    j = min(j, [s for s, _ in steps].index("hyst"))
-                knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
-                cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j, steps=steps))
-            j, knc, carry = cuts[key]
-            c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry, steps=steps)
-        total += kernels.sse_kernel(p.y[k], c["z"])
+        memo = None
+        if alike is not None and alike[0][k] is not None:
+            memo = (k, alike[0][k])
+            got = alike[1].get(memo)
+            if got is not None:
+                total += got
+                continue
+        try:
+            part = _knob_sse(p, plan, steps, eff, cuts, sigs, rest, k, kn)
+        except ModelError:
+            if memo is not None:
+                alike[1][memo] = math.inf
+            raise
+        if memo is not None:
+            alike[1][memo] = part
+        total += part
     return total
+
+
+def _knob_sse(p: Prep, plan: E.Plan, steps: list, eff: E.Effect, cuts: dict, sigs: dict, rest: bool,
+              k: int, kn: KnobModel) -> float:
+    """Knob ``k``'s share of :func:`_sse_from_cut`."""
+    sig = sigs[k]
+    if eff.spec_form.stage == "condition":
+        knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
+        c = E.run_signals(plan, knc, sig, p.q[k], steps=steps)
+    else:
+        key = (eff.form, k, rest)
+        if key not in cuts:
+            j = E.step_index(plan, eff)
+            if not rest and type(eff.type).at_rest is not EffectType.at_rest:
+                # its static map sets the hysteresis' start: reuse only what comes before it
+                j = min(j, [s for s, _ in steps].index("hyst"))
+            knc = E.condition_knob(kn, plan, p.shape, p.condition, p.shape_stated, k)
+            cuts[key] = (j, knc, E.run_signals(plan, knc, sig, p.q[k], stop=j, steps=steps))
+        j, knc, carry = cuts[key]
+        c = E.run_signals(plan, knc, sig, p.q[k], start=j, carry=carry, steps=steps)
+    return kernels.sse_kernel(p.y[k], c["z"])
 
 
 def fit_counts(etype: EffectType, grid: Sequence[GridPoint]) -> np.ndarray:

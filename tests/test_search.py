@@ -30,6 +30,25 @@ def test_the_table_is_a_prediction_per_grid_point(family, base):
             assert T[i, j] == pytest.approx(want, rel=1e-9, abs=1e-9), (g, i)
 
 
+@pytest.mark.parametrize("base", [(), (E.make_effect("creep", fraction=0.2, tau=2.0),)])
+def test_every_saturation_point_is_its_prediction(base):
+    """The saturation table's shortcuts (a stop or knee the run never reaches takes the base SSE;
+    one that leaves the start alone reuses the hysteresis; points alike on a knob share its SSE
+    there) give each point's own prediction: the whole grid on a one-knob and a two-knob run."""
+    etype = E.EFFECTS["saturation"]
+    grid = S.family_grid(etype)
+    preps = [p for p in PREPS if len(p.knobs) == 1][:1] + [p for p in PREPS if len(p.knobs) == 2][:1]
+    base_sse = np.array([p.sse(base) for p in preps])
+    T = S.table(preps, base, base_sse, etype, grid)
+    reached = 0
+    for j, g in enumerate(grid):
+        for i, p in enumerate(preps):
+            want = p.sse(base + (g.effect,)) if g.effect is not None else math.inf
+            assert T[i, j] == pytest.approx(want, rel=1e-12, abs=1e-9), (g, i)
+            reached += want != pytest.approx(base_sse[i], rel=1e-12)
+    assert reached > len(grid) // 2  # the runs reach most of the grid's stops and knees
+
+
 def test_a_form_with_more_parameters_needs_more_runs():
     etype = E.EFFECTS["stretch"]
     grid = S.family_grid(etype)

@@ -31,13 +31,13 @@ physics and, when it is not the default, the form: ``{"name": "coupling", "form"
 """
 from .base import STAGES, Effect, EffectType, Form, Signals
 from .chain import (ChainState, Inverse, KnobTrace, Plan, condition_knob, contact_current, inverse, predict,
-                    run_condition, run_signals, step_index, tip_chain)
+                    rest_input, run_condition, run_signals, step_index, tip_chain)
 from .registry import (ALIASES, EFFECTS, as_effect, as_effects, effect_type, format_effects, make_effect,
                        parse_effect, parse_effects)
 
 __all__ = [
     "ALIASES", "ChainState", "EFFECTS", "Effect", "EffectType", "Form", "Inverse", "KnobTrace", "Plan", "STAGES",
     "Signals", "as_effect", "as_effects", "condition_knob", "contact_current", "effect_type", "format_effects",
-    "inverse", "make_effect", "parse_effect", "parse_effects", "predict", "run_condition", "run_signals",
+    "inverse", "make_effect", "parse_effect", "parse_effects", "predict", "rest_input", "run_condition", "run_signals",
     "step_index", "tip_chain",
 ]

@@ -279,6 +279,21 @@ class EffectType:
         state behind a reading); the identity unless the stage bends the static map."""
         return y
 
+    def knob_key(self, eff: "Effect", k: int) -> Any:
+        """A hashable key of what this stage does on knob ``k`` alone: two effects of this type
+        with equal keys predict knob ``k`` of any run alike, given the same other effects (the
+        diagnosis' search computes such a knob once, :func:`hystcli.search.table`); None (the
+        default): no such promise."""
+        return None
+
+    def identity_range(self, eff: "Effect", k: int) -> tuple[float, float] | None:
+        """The closed interval of its input on which this output stage on knob ``k`` is the
+        identity, its :meth:`at_rest` too; None where there is none (the default). A run whose
+        input to the stage stays inside it is predicted exactly as without the effect, so the
+        diagnosis' search takes the base SSE there without running the chain
+        (:func:`hystcli.search.table`)."""
+        return None
+
     def new_state(self, eff: "Effect") -> Any:
         """A fresh state of this effect's forward stage (None: it carries none)."""
         return None

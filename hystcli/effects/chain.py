@@ -213,6 +213,16 @@ def _rest(plan: Plan, y0: float, sig: Signals) -> float:
     return y0
 
 
+def rest_input(plan: Plan, eff: Effect, y0: float, sig: Signals) -> float:
+    """What :func:`_rest` hands output stage ``eff``'s ``at_rest``: the reading ``y0`` with the
+    output stages after ``eff`` undone."""
+    for e in reversed(plan.output):
+        if e is eff:
+            break
+        y0 = e.type.at_rest(e, y0, sig)
+    return y0
+
+
 def run_signals(plan: Plan, kn: KnobModel, sig: Signals, x: np.ndarray, state: ChainState | None = None,
                 start: int = 0, carry: dict | None = None, stop: int | None = None,
                 steps: list | None = None) -> dict:

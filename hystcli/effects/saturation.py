@@ -136,6 +136,23 @@ class Saturation(EffectType):
             return np.where(z >= 0.0, lim * np.tanh(z / lim), neg * np.tanh(z / neg))
         return lim * np.tanh(z / lim)
 
+    def knob_key(self, eff, k):
+        # the map on one knob: its kind and that knob's limits (a -knobs form is the one-limit
+        # form on each knob, with knob 2's limit its own; a knob-1 run does not see knob2)
+        lim, neg = self._limits(eff, k)
+        if eff.form == "knee":
+            return "knee", lim, eff["slope"]
+        if self._hard(eff):
+            return "hard", lim
+        return ("asymmetric", lim, neg) if eff.form == "asymmetric" else ("smooth", lim)
+
+    def identity_range(self, eff, k):
+        # a stop and a knee leave the tip alone up to their limits; tanh bends every sample
+        if eff.form == "knee" or self._hard(eff):
+            lim, neg = self._limits(eff, k)
+            return -neg, lim
+        return None
+
     def at_rest(self, eff, y, sig):
         lim, neg = self._limits(eff, sig.k)
         if eff.form == "knee":
