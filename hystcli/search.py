@@ -189,7 +189,11 @@ def table(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray,
 
     A run the form cannot act on (coupling on a one-knob run, friction on a straight shaft) and a
     grid point that switches the effect off keep the base SSE without a prediction. Within a run,
-    everything the chain computes before the candidate's stage is computed once per form.
+    everything the chain computes before the candidate's stage is computed once per form. A
+    stage that is the identity inside a range (:meth:`EffectType.identity_range`: a stop, a
+    knee) keeps the base SSE where the run's input to it stays inside, and points that do the
+    same to a knob (:meth:`EffectType.knob_key`) compute it once: every entry is the point's
+    own prediction, bit for bit.
     """
     T = np.empty((len(preps), len(grid)))
     base = tuple(base)
