@@ -16,7 +16,9 @@ An effect type (one subclass of :class:`EffectType` per module of this package) 
 * how diagnosis **searches** it: the grid of each form (:meth:`Form.grid`), the parameters that
   move the tip, their scales and bounds, which runs it can act on (:meth:`EffectType.acts_on`), and
   which physical regressors its residual follows (:attr:`EffectType.regressors`, for the
-  form-agnostic "which" stage of the diagnosis).
+  form-agnostic "which" stage of the diagnosis). Two optional hooks let the search skip work
+  without changing a number: where a stage is the identity (:meth:`EffectType.identity_range`)
+  and what it does to each knob alone (:meth:`EffectType.knob_key`).
 
 The chain that runs the stages in order, forward and inverse, is :mod:`hystcli.effects.chain`;
 the registry that lists the effect types is :mod:`hystcli.effects.registry`.
