@@ -143,8 +143,9 @@ DRIVER = {"name": "torque", "cycles": 0.0}
 DONORS = {"rule": "table"}
 
 
-def back_end_torque(series: str, name: str) -> float:
-    """Mean back-end (input spindle) torque after the load came on (mN m), from the original file."""
+def back_end_torque_counts(series: str, name: str) -> np.ndarray:
+    """(time s, back-end torque in sensor counts) rows of the original file (the importer does
+    not keep the torque column); ``name`` may carry any suffix."""
     import gzip
 
     rows = []
@@ -153,7 +154,12 @@ def back_end_torque(series: str, name: str) -> float:
             if line.strip() and not line.startswith("%"):
                 f = line.split(",")
                 rows.append((float(f[0]), float(f[2])))
-    a = np.array(rows)
+    return np.array(rows)
+
+
+def back_end_torque(series: str, name: str) -> float:
+    """Mean back-end (input spindle) torque after the load came on (mN m), from the original file."""
+    a = back_end_torque_counts(series, name)
     cyc = DRIVER["cycles"]
     keep = a[:, 0] >= SETTLE_S
     if cyc > 0:

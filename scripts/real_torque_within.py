@@ -19,7 +19,6 @@ import does not keep). Deterministic.
 """
 from __future__ import annotations
 
-import gzip
 import math
 import sys
 import warnings
@@ -30,27 +29,19 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "scripts"))
 
 from hystcli.compensation import predict_tip  # noqa: E402
 from hystcli.identify import identify  # noqa: E402
 from hystcli.io import read_run  # noqa: E402
+from real_study import BE_NM_PER_COUNT, REAL, SETTLE_S, back_end_torque_counts  # noqa: E402
 
-REAL = ROOT / "sample_data" / "real"
-RAW = ROOT.parent / "shared" / "real" / "mrdlab"
-BE_NM_PER_COUNT = 3.9811e-5  # PROVENANCE.md, column 3
-SETTLE_S = 2.0               # as scripts/real_study.py: the load is on and the jaw settled
 GRID = np.linspace(0.0, 0.12, 13)  # deg per mN m; the across-file slopes are 0.067 .. 0.098
 
 
 def torque_at(series: str, stem: str, t: np.ndarray) -> np.ndarray:
     """The back-end torque (mN m) of the original 1 kHz file at the run's times."""
-    rows = []
-    with gzip.open(RAW / series / f"{stem}.TXT.gz", "rt") as fh:
-        for line in fh:
-            if line.strip() and not line.startswith("%"):
-                f = line.split(",")
-                rows.append((float(f[0]), float(f[2])))
-    a = np.array(rows)
+    a = back_end_torque_counts(series, stem)
     return np.interp(t, a[:, 0], a[:, 1] * BE_NM_PER_COUNT * 1000.0)
 
 
