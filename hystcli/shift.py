@@ -672,9 +672,10 @@ def _reading_noise(c: np.ndarray) -> float:
 
 
 class _LimitReached(Exception):
-    def __init__(self, why: str) -> None:
+    def __init__(self, why: str, record_end: bool = False) -> None:
         super().__init__(why)
         self.why = why
+        self.record_end = record_end    # a replay that goes no further this way: it turns there
 
 
 class _Search:
@@ -728,7 +729,7 @@ class _Search:
         try:
             s = self.probe.step_to(target)
         except ReplayExhausted as exc:
-            raise _LimitReached(str(exc)) from None
+            raise _LimitReached(str(exc), record_end=True) from None
         self.steps += 1
         self.travel += abs(target - self.q)
         self.q = target
@@ -1373,7 +1374,7 @@ class _Search:
                     # start, whose few flat readings sat at the no-load level, is the evidence there is
                     self.dir = self.short[0]
                     return LOAD, self.short[1]
-                if self.back is None and not self.contacts and self._released() and (
+                if self.back is None and not self.contacts and self._released(lim.record_end) and (
                         self.start_outside or self.dir * (self.q - self.start) >= self.backlash[self.dir] + 1.0):
                     # it left a taut tendon across the dead zone for the other edge, which lies
                     # beyond reach (the travel limit, or the end of a record): the edge it left is
@@ -1411,10 +1412,13 @@ class _Search:
             self.pending_refusal = why
         return None
 
-    def _released(self) -> bool:
+    def _released(self, record_end: bool = False) -> bool:
         """Whether the tendon the walk back would take up is slack by now: the current has come
         back to the no-load level (the band :meth:`_taut_side` reads) and stays there, no longer
-        moving toward it, over the last :data:`AFTER_STEPS` readings (a degree or more).
+        moving toward it, over the last :data:`AFTER_STEPS` readings (a degree or more). Readings
+        past the band on the side ahead count as slack behind while they climb more gently than a
+        taut tendon (a pretensioned dead zone climbing out of the band over a long way: design
+        replay 4400203, 1.3 mA/deg over 18 deg, 19 mA out against a band of 18).
 
         From a taut start it is the tendon the search turned from. Till then it still carries
         load (its tip on the backlash plateau, or still unloading), and a walk back takes it up
@@ -1422,19 +1426,35 @@ class _Search:
         12 deg from where it turned, the kink 13 deg past the edge; 76: a held load 21 deg long).
         From a start in the dead zone it is the other tendon, which the search moved away from
         all the way. Without a no-load level, never.
+
+        ``record_end``: the search stopped where a replay goes no further this way. Its last
+        reading may be taken where the record slows to its turn, and a viscous motor's current
+        falls with the speed there (design replay 4400314: 5 mA toward the no-load level over the
+        last half degree before a sine's crest, on a dead zone at 0.7 mA/deg); the readings
+        without it count as well (design replay 328: the flat only its last three readings long,
+        the one at the end among them).
         """
+        return self._slack_behind(self.seg_q, self.seg_c) or (
+            record_end and self._slack_behind(self.seg_q[:-1], self.seg_c[:-1]))
+
+    def _slack_behind(self, seg_q: list[float], seg_c: list[float]) -> bool:
+        """:meth:`_released` on the segment's readings ``seg_q``, ``seg_c``."""
         c0 = self.th.no_load(self.dir, self.moving)[0]
         if c0 is None:
             return False
-        if len(self.seg_q) < AFTER_STEPS or abs(self.seg_q[-1] - self.seg_q[-AFTER_STEPS]) < 1.0:
+        if len(seg_q) < AFTER_STEPS or abs(seg_q[-1] - seg_q[-AFTER_STEPS]) < 1.0:
             return False
-        q, c = np.array(self.seg_q[-AFTER_STEPS:]), np.array(self.seg_c[-AFTER_STEPS:])
-        if not all(self._taut_side(float(v)) == 0 for v in c):
+        q, c = np.array(seg_q[-AFTER_STEPS:]), np.array(seg_c[-AFTER_STEPS:])
+        sides = {self._taut_side(float(v)) for v in c}
+        if -self.dir in sides:
+            return False
+        if self.dir in sides and _ls_slope(q, c) >= self.th.eps_lower:
+            # past the band on the side ahead at a taut tendon's slope: the tendon ahead is loading
             return False
         # stays: not still moving toward the no-load level, as an unloading does through a wide
         # band (design replay 397, a wall plant: 11 mA over the last 1.5 deg, 100 mA short of the
         # no-load level, inside the sweep's band of +-132)
-        seg = np.array(self.seg_c)
+        seg = np.array(seg_c)
         noise = _reading_noise(seg)
         if not math.isfinite(noise):
             return False

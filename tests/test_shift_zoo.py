@@ -222,6 +222,29 @@ def test_a_search_from_the_dead_zone_walks_back_across_it_when_its_edge_is_out_o
     assert r is not None and not r.start_outside and r.walked_back
 
 
+def test_a_dead_zone_climbing_out_of_the_band_ahead_is_slack_behind():
+    # replay 4400203 (a fresh range's, looked at after its figures: design data now; a spiky
+    # plant): the knob starts with the negative tendon taut, the search crosses the dead zone
+    # toward a positive edge 0.3 deg short of the travel limit. The dead zone's current climbs at
+    # 1.3 mA/deg (the sweep's 1.34) for 18 deg and ends 19 mA above the no-load level, past the
+    # band's 18. Stop 37's code read that as a tendon still taut and refused; the readings lie on
+    # the side ahead, not behind, and climb more gently than a taut tendon, so the tendon behind
+    # is slack and the walk back reads its edge (5.51 deg) from the flat
+    r = _right_or_refused(4400203)
+    assert r is not None and r.start_outside and r.walked_back and r.edge == "neg"
+
+
+def test_a_replays_last_reading_at_its_turn_does_not_make_the_tendon_behind_look_loaded():
+    # replay 4400314 (design data now; a Coulomb-viscous plant, a sine replay): from a taut
+    # start the search crosses the dead zone toward an edge (21.85 deg) past the record's crest
+    # (21.18). The last reading before the crest is 5 mA lower than the flat before it, as the
+    # knob slows to its turn and the viscous current with it; stop 37's code took that for the
+    # tendon behind still unloading and refused. Without that reading the flat stays, and the
+    # walk back reads the negative edge (0.14 deg)
+    r = _right_or_refused(4400314)
+    assert r is not None and r.start_outside and r.walked_back and r.edge == "neg"
+
+
 def test_an_unloading_further_off_the_no_load_level_than_the_dead_zone_swings_is_not_slack():
     # design replay 397 (a wall plant, the far edge out of reach): where the search stops, the
     # tendon behind still unloads at 7.5 mA/deg, 108 mA short of the no-load level. The sweep's
