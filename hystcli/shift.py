@@ -30,8 +30,9 @@ real current is not one law:
   A start in the dead zone whose current turns out to be loading from the first steps turns round
   the same way. Where the far edge lies beyond reach (the travel limit, or where a record goes),
   the search turns back once and takes the tendon it left up from the dead zone's flat, provided
-  that tendon has gone slack (its current back at the no-load level): a tendon still held or
-  still unloading is taken up again where the knob last turned, not at its edge.
+  that tendon has gone slack (its current back at the no-load level, or past it on the side
+  ahead at a dead zone's gentle slope): a tendon still held or still unloading is taken up again
+  where the knob last turned, not at its edge.
 * **what an edge is.** On the readings since the last reversal, the loading edge is a jump in
   slope out of a flat (or pretensioned, gently sloped) stretch after which nothing flat follows
   (:func:`hystcli.current.loading_edge`, the reading identification uses too), placed by a
