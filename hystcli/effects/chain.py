@@ -207,15 +207,13 @@ def _hysteresis(kn: KnobModel, x: np.ndarray, yh0: float, dp, dn, widen: float =
 
 
 def _rest(plan: Plan, y0: float, sig: Signals) -> float:
-    # the hysteresis state behind a reading y0 at rest: undo the output stages' static maps
-    for e in reversed(plan.output):
-        y0 = e.type.at_rest(e, y0, sig)
-    return y0
+    # the hysteresis state behind a reading y0 at rest: undo every output stage's static map
+    return rest_input(plan, None, y0, sig)
 
 
-def rest_input(plan: Plan, eff: Effect, y0: float, sig: Signals) -> float:
+def rest_input(plan: Plan, eff: Effect | None, y0: float, sig: Signals) -> float:
     """What :func:`_rest` hands output stage ``eff``'s ``at_rest``: the reading ``y0`` with the
-    output stages after ``eff`` undone."""
+    output stages after ``eff`` undone (``eff`` None: all of them, the hysteresis' start)."""
     for e in reversed(plan.output):
         if e is eff:
             break
