@@ -22,7 +22,8 @@ is (DESIGN.md section 4):
   read as the flip needs an unloading after it clearly steeper than the dead zone: one no steeper
   is the dead zone's tilt, and the "flip" the unloading itself (:data:`TILT_UNLOAD`); and it must
   fall more steeply than the load rose just before the reversal: no steeper, it is that load
-  coming back down its own curve (a stiffening cable, :data:`RETRACE`). After a
+  coming back down its own curve (a stiffening cable, :data:`RETRACE`); a fall whose slope, or
+  the rise before it, was not read is not weighed, and not read as the flip. After a
   step at the reversal (a force dropped at once), a held plateau must go on for a degree past the
   conditioning low-pass's ringing (:func:`_ring_until`), which lies level for a while too.
 * the **levels**: the no-load current of each direction (the motor's Coulomb friction moves it
@@ -734,7 +735,14 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
             # back down its own curve, not the sheath friction flipping
             retrace = (s.fall_slope is not None and end is not None
                        and s.fall_slope <= RETRACE * max(d * end, 1e-12))
-            return s.plateau_held or not (elastic or retrace)
+            # and the fall is the flip only where both could be weighed: a fall whose slope was not
+            # read, or after a stretch whose end slope is unknown, may be either (design sweep 1990,
+            # a Coulomb flip on a stretch law read as b_pos 2.2, 5.0 deg off; zoo sweep 4400423, a
+            # wall's elastic give at 216 mA/deg after the record's short first stretch, b_neg 7.4).
+            # Design sweeps 0-2999 and zoo ranges 4300000-4500499 (looked at after their figures),
+            # current only, per record: those two right, nothing else changed
+            checked = s.fall_slope is not None and end is not None
+            return s.plateau_held or (checked and not (elastic or retrace))
 
         kept = [s for i, s in enumerate(stretches[:-1]) if shown(i, s)]
         # the complete stretches after a loaded reversal (the one before took the tendon up past
