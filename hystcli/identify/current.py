@@ -98,6 +98,16 @@ caught and one record right within 0.4 deg is refused, 4288, at 0.24 and 19x). T
 depends on its shape, not on where the tendon was taken up: the edge is refused."""
 
 
+ZOOM = 0.25
+"""Share of a stretch's travel, each side of a kink read on a steep "dead zone", over which
+:func:`read_stretch` reads the take-up again (the one value tried). Design sweeps 0-2999 and zoo
+ranges 4300000-4500499 (looked at after their figures), current only, per record: 15 more
+records right (5 silent failures among them: stiffening cables read 1.2 to 2.1 deg late, 1603,
+2513, 2843, 4300029, 4500265), 3 right ones refused (703, 2483, 4400355: with one side's dead
+zone read flat, the other's tilt is a curve by :data:`DEAD_TILT`), one wrong refusal returned
+with b_neg 1.11 deg off (1584, a stiffening cable)."""
+
+
 @dataclass(frozen=True)
 class Stretch:
     """The current's reading on one monotone stretch of the knob.
@@ -267,6 +277,23 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
     kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0,
                         min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+    if kink is not None and abs(kink.before) >= DEAD_SHARE * kink.after:
+        # a "dead zone" climbing at a fair share of the loaded slope may be one piece spanning the
+        # other tendon's unloading, the flat and the take-up's start: a long stretch that
+        # stiffens strongly spends the segmentation's pieces on its curves (zoo sweep 4500265, a
+        # stiffening stretch law over +-44 deg: five pieces, the one read as the dead zone from
+        # -6.6 to +7.9 deg at 12.5 mA/deg, d_pos 1.4 deg late). Read again on the bins around
+        # the kink (:data:`ZOOM`), a kink out of a piece that is flat against its loaded slope
+        # (half of DEAD_SHARE) replaces it, when it lies no further along the motion and loads
+        # as the first did (no wall's kink beyond it: design sweep 161, 15 deg off); a
+        # pretensioned dead zone climbs the same there, and its kink stands (2148)
+        near = np.abs(qq[0] + d * xb - kink.at) <= ZOOM * travel
+        if near.sum() >= 10:
+            k2 = loading_edge(qq[0] + d * xb[near], vb[near], d, sig, minlen=minlen, resolution=width / 10.0,
+                              min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+            if (k2 is not None and abs(k2.before) < 0.5 * DEAD_SHARE * k2.after and d * (k2.at - kink.at) <= 0.5
+                    and k2.after <= LOADED_BAND * kink.after):
+                kink = k2
     arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
     plateau, held, plateau_se, fall_slope = None, False, None, None
