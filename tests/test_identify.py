@@ -1122,6 +1122,22 @@ def test_current_only_a_kink_before_its_own_stretchs_arrival_is_no_loading_edge(
         identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
 
 
+def test_current_only_judges_a_one_cycle_kink_against_the_first_stretchs_level():
+    # zoo sweep 4600157 (a drop law holding a 16-deg backlash; one slow sine cycle; looked at after
+    # the 4600000 range's figures): on the one stretch up from the bottom reversal the negative
+    # tendon's held load ends at +1.4 deg, 96 mA below the no-load level, and that kink was read as
+    # d_pos (true +12.0), returned at +-0.11 with exit 0; detect-shift then put the shift 10.6 deg
+    # off. With no other stretch from a reversal the kink had been judged against its own level;
+    # the first stretch's take-up gives the no-load level, the kink is a hold ending, and d_pos is
+    # refused
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.sweep_case(4600157, tip=False)
+    with pytest.raises(IdentificationError, match="never clearly shows the positive tendon taken up"):
+        identify(parse_run(case.record.csv_text(), source="z"), use_tip=False)
+
+
 def test_current_only_refuses_a_dead_zone_narrower_than_its_edges_can_tell():
     # independent plant (3100394, a drop law with a steep pretension, 4.6 mA/deg in a 13.5-deg dead
     # zone, two cycles of +-10 deg at 70 deg/s; looked at after the 3100000 range's figures): the

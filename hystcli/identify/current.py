@@ -594,8 +594,16 @@ def _references(stretches: list[Stretch]) -> tuple[float, list[tuple[int, float]
     a tendon taken up, both ways, and an unloading tendon's current meet the dead zone (a kink
     read where a held load starts to unload sits far from it, on the loaded side; with one edge
     read each way, one of them such a kink, the edges alone put the level halfway and both fell
-    outside it: design seed 2005)."""
+    outside it: design seed 2005). Where the stretches from a reversal give fewer than two levels,
+    the record's first stretch adds its own: a one-cycle sweep's one stretch up from the bottom
+    reversal otherwise had its kink judged against its own level (zoo sweep 4600157, a drop law
+    holding 16 deg of backlash: the held load's end, 96 mA below the no-load level, was read as
+    d_pos, 10.6 deg off at +-0.11; the first stretch's take-up put the level right and the kink
+    is refused. Design sweeps 0-2999 and 4300000-4600499, current only, per record: that record
+    refused, nothing else changed)."""
     lv = [k.level for s in stretches if s.from_reversal for k in (s.edge, s.arrival) if k is not None]
+    if len(lv) < 2:
+        lv += [k.level for s in stretches[:1] if not s.from_reversal for k in (s.edge, s.arrival) if k is not None]
     c0 = float(np.median(lv)) if lv else math.nan
     ups = [(i, s.loaded_slope) for i, s in enumerate(stretches) if s.from_reversal and s.loaded_slope is not None]
     loaded_ref = float(np.median([a for _, a in ups])) if ups else math.nan
