@@ -12,7 +12,9 @@ is (DESIGN.md section 4):
   is followed by the dead zone's flat. Ascending stretches give :math:`D_{pos}`, descending ones
   :math:`D_{neg}`; the kink is then placed by :func:`hystcli.current.kink_fit` (a stiffening
   cable allowed). Pretension (a sloped dead zone) is a smaller jump, not a missing one; a loaded
-  slope a small share of the record's other take-ups' is none (:data:`LOADED_SHARE`).
+  slope a small share of the record's other take-ups' is none (:data:`LOADED_SHARE`). A kink out
+  of a "dead zone" that climbs steeply is read again on the current around it (:data:`ZOOM`): a
+  long stretch that stiffens can spend the segmentation's pieces on its loaded curves.
 * the **backlash plateau**: after a reversal with the tendon loaded, a current that holds (a
   flat piece, possibly after an immediate drop; tilted as a pretensioned dead zone is) before it
   unloads shows the backlash width :math:`B`; a current that unloads at once (the tendon's
