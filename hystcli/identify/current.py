@@ -277,8 +277,14 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         return out
     minlen = max(2, int(round(0.5 / width)))
     sig = noise / math.sqrt(max(1.0, qq.size / max(xb.size, 1)))   # noise of a bin's median, roughly
-    kink = loading_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0,
-                        min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+    qb = qq[0] + d * xb                      # the bins' knob angles
+
+    def take_up(sel: slice | np.ndarray = slice(None)) -> Kink | None:
+        # the loading edge of the bins ``sel`` (all of them, or those around a first kink)
+        return loading_edge(qb[sel], vb[sel], d, sig, minlen=minlen, resolution=width / 10.0,
+                            min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+
+    kink = take_up()
     if kink is not None and abs(kink.before) >= DEAD_SHARE * kink.after:
         # a "dead zone" climbing at a fair share of the loaded slope may be one piece spanning the
         # other tendon's unloading, the flat and the take-up's start: a long stretch that
@@ -289,14 +295,13 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         # (half of DEAD_SHARE) replaces it, when it lies no further along the motion and loads
         # as the first did (no wall's kink beyond it: design sweep 161, 15 deg off); a
         # pretensioned dead zone climbs the same there, and its kink stands (2148)
-        near = np.abs(qq[0] + d * xb - kink.at) <= ZOOM * travel
+        near = np.abs(qb - kink.at) <= ZOOM * travel
         if near.sum() >= 10:
-            k2 = loading_edge(qq[0] + d * xb[near], vb[near], d, sig, minlen=minlen, resolution=width / 10.0,
-                              min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+            k2 = take_up(near)
             if (k2 is not None and abs(k2.before) < 0.5 * DEAD_SHARE * k2.after and d * (k2.at - kink.at) <= 0.5
                     and k2.after <= LOADED_BAND * kink.after):
                 kink = k2
-    arrival = (arrival_edge(qq[0] + d * xb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
+    arrival = (arrival_edge(qb, vb, d, sig, minlen=minlen, resolution=width / 10.0)
                if from_reversal else None)
     plateau, held, plateau_se, fall_slope = None, False, None, None
     # from the reversal on (the slow start included), up to the next reversal's own rounding: a
@@ -762,24 +767,26 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
         def shown(i: int, s: Stretch) -> bool:
             if s.direction != -d or s.plateau is None:
                 return False
-            prev = stretches[i - 1] if i > 0 else None
-            # against the loaded slope the stretches from a reversal read at their edges (the
-            # record's first stretch may have taken the wall's own steep rise for its edge)
-            ref = loaded_ref if math.isfinite(loaded_ref) else (prev.loaded_slope if prev is not None else None)
+            if s.plateau_held:
+                return True
             end = end_slopes[i - 1] if i > 0 else None
-            elastic = (end is not None and ref is not None and d * end >= ELASTIC_TOP * max(ref, 1e-12))
-            # a fall no steeper than the load rose just before the reversal is that load coming
-            # back down its own curve, not the sheath friction flipping
-            retrace = (s.fall_slope is not None and end is not None
-                       and s.fall_slope <= RETRACE * max(d * end, 1e-12))
-            # and the fall is the flip only where both could be weighed: a fall whose slope was not
-            # read, or after a stretch whose end slope is unknown, may be either (design sweep 1990,
-            # a Coulomb flip on a stretch law read as b_pos 2.2, 5.0 deg off; zoo sweep 4400423, a
+            # the fall is the flip only where it can be weighed: a fall whose slope was not read,
+            # or after a stretch whose end slope is unknown, may be either (design sweep 1990, a
+            # Coulomb flip on a stretch law read as b_pos 2.2, 5.0 deg off; zoo sweep 4400423, a
             # wall's elastic give at 216 mA/deg after the record's short first stretch, b_neg 7.4).
             # Design sweeps 0-2999 and zoo ranges 4300000-4500499 (looked at after their figures),
             # current only, per record: those two right, nothing else changed
-            checked = s.fall_slope is not None and end is not None
-            return s.plateau_held or (checked and not (elastic or retrace))
+            if s.fall_slope is None or end is None:
+                return False
+            prev = stretches[i - 1]
+            # against the loaded slope the stretches from a reversal read at their edges (the
+            # record's first stretch may have taken the wall's own steep rise for its edge)
+            ref = loaded_ref if math.isfinite(loaded_ref) else prev.loaded_slope
+            elastic = ref is not None and d * end >= ELASTIC_TOP * max(ref, 1e-12)
+            # a fall no steeper than the load rose just before the reversal is that load coming
+            # back down its own curve, not the sheath friction flipping
+            retrace = s.fall_slope <= RETRACE * max(d * end, 1e-12)
+            return not (elastic or retrace)
 
         kept = [s for i, s in enumerate(stretches[:-1]) if shown(i, s)]
         # the complete stretches after a loaded reversal (the one before took the tendon up past
