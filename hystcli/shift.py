@@ -1449,7 +1449,8 @@ class _Search:
         sides = {self._taut_side(float(v)) for v in c}
         if -self.dir in sides:
             return False
-        if self.dir in sides and _ls_slope(q, c) >= self.th.eps_lower:
+        slope = _ls_slope(q, c)
+        if self.dir in sides and slope >= self.th.eps_lower:
             # past the band on the side ahead at a taut tendon's slope: the tendon ahead is loading
             return False
         # stays: not still moving toward the no-load level, as an unloading does through a wide
@@ -1471,7 +1472,7 @@ class _Search:
         # but only as far from that level as its swing: an unloading further off is no dead zone
         # (design replay 397: 108 mA short of the level, a swing of 88, the sweep's slope 8.7
         # mA/deg and the unloading's 7.5)
-        change = _ls_slope(q, c) * (q[-1] - q[0])
+        change = slope * (q[-1] - q[0])
         short = c0 - float(np.mean(c))
         allowed = 3.0 * noise
         if abs(short) <= self.th.dead_zone_swing + self.th.spread(self.moving) + allowed:
