@@ -1294,3 +1294,38 @@ def test_a_dead_zone_that_bends_over_two_periods_is_not_read_as_cogging():
     # its d_pos (18.65 against 15.04) only the record's first stretch shows: an estimate, unclaimed
     assert "d_pos" not in fit.stderr
     _assert_within(fit, case.truth, ("d_neg",), tol=0.1)
+
+
+def test_current_only_a_walls_steep_take_up_out_of_a_loaded_slope_is_read_again_before_it():
+    # zoo sweep 4600064 (a wall on the negative side, a stretch law, noise 0.005 mA): on both
+    # stretches down from the top reversal the segmentation merged the dead zone's flat and the
+    # negative tendon's loading (18 mA/deg) into one piece at 5.9 mA/deg, and read the wall's
+    # contact at -13.77 deg (296 mA/deg after it) as the take-up. d_neg came back 9.35 deg off at
+    # +-0.21, exit 0. A take-up more than LOADED_BAND times steeper than the record's other ones,
+    # out of a slope already a tenth of theirs, is a wall's; the stretch is read again before it
+    from hystcli.identify.current import LOADED_BAND
+
+    case, fit = _zoo_current_fit(4600064)
+    down = [s for s in fit.current.stretches if s.from_reversal and s.direction == -1 and s.edge is not None]
+    ups = [s.loaded_slope for s in fit.current.stretches if s.from_reversal and s.direction == 1]
+    assert down and all(abs(s.edge.at - case.truth.d_neg) <= 0.5 for s in down)
+    assert all(s.loaded_slope <= LOADED_BAND * float(np.median(ups)) for s in down)
+    _assert_within(fit, case.truth, ("d_pos", "d_neg"), tol=0.5)
+
+
+def test_current_only_a_faint_kink_on_one_stretch_carries_an_honest_uncertainty():
+    # design sweep 2391 (Coulomb and viscous friction): each edge read by one stretch from a
+    # reversal, at clarities of 10.7 (d_pos) and 7.6 (d_neg), 0.71 and 0.52 deg off, with standard
+    # errors of 0.13 and 0.20 from the two-line fit: 5.5 and 2.6 sigma out. A faint kink is placed
+    # no better than KINK_SPAN over its clarity: the truth is now within two standard errors
+    from hystcli.identify.current import KINK_SPAN
+
+    case, fit = _zoo_current_fit(2391)
+    for name, d in (("d_pos", 1), ("d_neg", -1)):
+        at = getattr(fit.model, name)
+        ks = [s.edge for s in fit.current.stretches if s.from_reversal and s.direction == d and s.edge is not None
+              and abs(s.edge.at - at) <= 1.0]
+        assert len(ks) == 1 and ks[0].clarity < 15
+        assert abs(at - getattr(case.truth, name)) > 0.5
+        assert fit.stderr[name] >= KINK_SPAN / ks[0].clarity
+        assert abs(at - getattr(case.truth, name)) <= 2 * fit.stderr[name]
