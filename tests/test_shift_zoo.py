@@ -13,6 +13,7 @@ import pytest
 from hystcli import shift
 from hystcli.errors import ShiftDetectionError
 from hystcli.io import parse_run
+from hystcli.model import Model
 from hystcli.zoo import plants
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "bench"))
@@ -303,6 +304,37 @@ def test_a_current_only_model_reads_no_load_past_a_held_load_it_could_not_call_b
     assert set(ident.unfixed) == {"b_pos", "b_neg"}
     assert ident.no_load_rising == pytest.approx(ident.no_load_falling, abs=1.0)
     rep = parse_run(case.replay.csv_text(), source="replay-255")
+    try:
+        r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
+    except ShiftDetectionError:
+        return
+    assert r.offset == pytest.approx(case.offset, abs=0.5)
+
+
+def test_a_current_only_model_reads_no_load_past_a_held_load_it_did_call_backlash():
+    # design replay 945 (a stiffening cable whose current follows the tip's load): the straight
+    # sweep holds the positive tendon's load 16.4 deg down from the top, into a 16.8-deg dead
+    # zone, and identify --current-only reads that backlash right (within 0.2 deg). Its tip
+    # offsets are the current's guess (omega 1.45), so the model's dead-zone flat took in the
+    # held load and the unloading: the falling no-load level came out -22.4 mA against the
+    # edges' -106.8, and detect-shift read the replay's held load ending as the edge, an offset
+    # of -1.99 against a true -9.17, exit 0. The level just before each loading edge is past
+    # any plateau, whether or not the current fixed the backlash
+    from hystcli.identify import identify
+
+    from hystcli.identify.current import UNLOAD_LEVEL
+
+    case = plants.replay_case(945)
+    fit = identify(parse_run(case.straight_sweep.csv_text(), source="straight"), use_tip=False).fits[1]
+    model, ident = Model({1: fit.model}, identification={1: fit.ident}), fit.ident
+    assert not set(ident.unfixed) & {"b_pos", "b_neg"}
+    assert abs(fit.model.b_pos - case.truth.b_pos) <= 0.5
+    # between the levels the two tendons were taken up from, give or take five noise sigmas
+    lo, hi = min(fit.current.no_load.values()), max(fit.current.no_load.values())
+    slack = UNLOAD_LEVEL * fit.current.noise
+    for level in (ident.no_load_rising, ident.no_load_falling):
+        assert lo - slack - 1e-9 <= level <= hi + slack + 1e-9
+    rep = parse_run(case.replay.csv_text(), source="replay-945")
     try:
         r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
     except ShiftDetectionError:

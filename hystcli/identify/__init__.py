@@ -380,7 +380,8 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
     if c is not None:
         ident = _levels(q, c, t, model, fit, reading, chk, rmse, stderr,
                         tuple(fit.sliding) + tuple(ambiguous_edges) if fit is not None
-                        else tuple(f"d_{s}" for s in reading.first_only) + tuple(unshown))
+                        else tuple(f"d_{s}" for s in reading.first_only) + tuple(unshown),
+                        offsets_guessed=fit is None)
     return KnobFit(knob=k, model=model, stderr=stderr, rmse=rmse, method=method, ident=ident,
                    n_reversals=int(chk.reversals.size), n_cycles=chk.n_cycles, current=reading,
                    tip=fit, bootstrap=bootstrap, warnings=tuple(warnings))
@@ -447,8 +448,11 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
 
 def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: TipFit | None,
             reading: CurrentReading | None, chk: SweepCheck, rmse: float | None,
-            stderr: Mapping[str, float], unfixed: tuple[str, ...] = ()) -> KnobIdentification:
-    """What Algorithm 1 needs of this knob's current, read where the model puts the tendons."""
+            stderr: Mapping[str, float], unfixed: tuple[str, ...] = (),
+            offsets_guessed: bool = False) -> KnobIdentification:
+    """What Algorithm 1 needs of this knob's current, read where the model puts the tendons.
+    ``offsets_guessed``: the model's tip offsets are the current reading's guess (identify
+    --current-only), not the tip's (a tip fit, or a model given to :func:`current_levels`)."""
     dq = np.gradient(q, t) if t.size > 1 else np.zeros_like(q)
     lo, hi = model.d_neg + 0.5, model.d_pos - 0.5
     if hi <= lo:
@@ -495,6 +499,24 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
             no_rise = edge_rise
         if no_fall is not None and edge_fall is not None and abs(no_fall - edge_fall) > band:
             no_fall = edge_fall
+    elif offsets_guessed and reading is not None and len(reading.no_load) == 2:
+        # a backlash the current did fix still leaves the tip's offsets a guess (omega given, h
+        # from the current), so the model's flats may take in a held load and its unloading
+        # (design replay 945's sweep: b_pos 16.4 deg of a 16.8-deg dead zone, read right; its
+        # falling level came out -22.4 mA against the edges' -106.8, and detect-shift read the
+        # replay's held load ending as the edge, 7.2 deg wrong at exit 0). Every no-load level
+        # lies between the levels the two tendons were taken up from, whatever the dead zone's
+        # tilt and the motor's friction either way; a level beyond them is a load, and is
+        # brought back to the nearer (replacing it outright with that direction's edge level
+        # moved a pretensioned dead zone's level by its whole tilt: design replay 243, 1.2 deg
+        # off). A model given with its tip (current_levels) puts its flats where the tip is free:
+        # the bench's true-loop stand-in for 4300237 read a falling level 15 mA above the edges'
+        # there, and right
+        lo_e, hi_e = min(reading.no_load.values()), max(reading.no_load.values())
+        slack_noise = UNLOAD_LEVEL * (reading.noise if math.isfinite(reading.noise) else 0.0)
+        lo_e, hi_e = lo_e - slack_noise, hi_e + slack_noise
+        no_rise = None if no_rise is None else min(max(no_rise, lo_e), hi_e)
+        no_fall = None if no_fall is None else min(max(no_fall, lo_e), hi_e)
     if fit is not None:
         slack &= on_flat
     known = [v for v in (no_rise, no_fall) if v is not None]
