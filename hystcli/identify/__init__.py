@@ -446,6 +446,11 @@ def _model_from_current(reading: CurrentReading | None, omega: float | None,
     return model, stderr
 
 
+def _noise_band(reading: CurrentReading) -> float:
+    """How far (mA) a level read off the current may stray by noise alone: UNLOAD_LEVEL sigmas."""
+    return UNLOAD_LEVEL * (reading.noise if math.isfinite(reading.noise) else 0.0)
+
+
 def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: TipFit | None,
             reading: CurrentReading | None, chk: SweepCheck, rmse: float | None,
             stderr: Mapping[str, float], unfixed: tuple[str, ...] = (),
@@ -493,7 +498,7 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         # where the two differ by more than the dead zone's own tilt across its width explains
         # (a pretensioned dead zone climbs tens of mA from edge to edge: design replays 0-499)
         tilt = abs(reading.dead_slope) * (model.d_pos - model.d_neg) if math.isfinite(reading.dead_slope) else 0.0
-        band = tilt + UNLOAD_LEVEL * (reading.noise if math.isfinite(reading.noise) else 0.0)
+        band = tilt + _noise_band(reading)
         edge_rise, edge_fall = reading.no_load.get(1), reading.no_load.get(-1)
         if no_rise is not None and edge_rise is not None and abs(no_rise - edge_rise) > band:
             no_rise = edge_rise
@@ -512,9 +517,8 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         # off). A model given with its tip (current_levels) puts its flats where the tip is free:
         # the bench's true-loop stand-in for 4300237 read a falling level 15 mA above the edges'
         # there, and right
-        lo_e, hi_e = min(reading.no_load.values()), max(reading.no_load.values())
-        slack_noise = UNLOAD_LEVEL * (reading.noise if math.isfinite(reading.noise) else 0.0)
-        lo_e, hi_e = lo_e - slack_noise, hi_e + slack_noise
+        lo_e = min(reading.no_load.values()) - _noise_band(reading)
+        hi_e = max(reading.no_load.values()) + _noise_band(reading)
         no_rise = None if no_rise is None else min(max(no_rise, lo_e), hi_e)
         no_fall = None if no_fall is None else min(max(no_fall, lo_e), hi_e)
     if fit is not None:

@@ -664,9 +664,13 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
     # a tendon taken up loads the motor at the tendon's stiffness, on every stretch that takes it
     # up: a kink whose loaded slope is a small share of what the record's other take-ups show is
     # no tendon taken up (the current's waviness, the tail of an unloading)
-    # per stretch, the median loaded slope of the record's other take-ups (None without any)
-    others_median = [float(np.median(o)) if o else None
-                     for o in ([a for j, a in ups if j != i] for i in range(len(stretches)))]
+    # per stretch, the median loaded slope of the record's other take-ups (None without any),
+    # leaving out the stretches ``skip`` as well
+    def median_of_others(skip: set[int] | frozenset[int] = frozenset()) -> list[float | None]:
+        return [float(np.median(o)) if o else None
+                for o in ([a for j, a in ups if j != i and j not in skip] for i in range(len(stretches)))]
+
+    others_median = median_of_others()
     weak = {i for i, s in enumerate(stretches) if s.edge is not None and others_median[i] is not None
             and s.edge.after < LOADED_SHARE * others_median[i]}
     # A dead zone whose current bends (the motor's viscous term following a sine's speed) may
@@ -692,8 +696,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
     # -13.8 deg, 296 mA/deg after it against the others' 30, out of a 5.9 mA/deg piece; d_neg came
     # back 9.35 deg off at +-0.21). Design sweeps 0-2999 and 4300000-4600499, current only, per
     # record: that record right, nothing else changed (4500064 refused by another rule).
-    firm_median = [float(np.median(o)) if o else None
-                   for o in ([a for j, a in ups if j != i and j not in weak] for i in range(len(stretches)))]
+    firm_median = median_of_others(weak)
     again = {}
     for i, s in enumerate(stretches):
         ref = others_median[i]
@@ -704,12 +707,11 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, chk: SweepCheck,
                 and abs(s.edge.before) >= LOADED_SHARE * firm)
         if s.edge is not None and i not in weak and not wall:
             continue
-        if wall:
-            r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=True, noise=noise,
-                             edge_before=s.edge.at, ring_s=ring_s)
-        else:
-            r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=True, noise=noise,
-                             edge_after=s.edge.at if s.edge is not None else None, fallback=True, ring_s=ring_s)
+        # a wall's stretch before its kink; a weak or missing take-up's past it, trying more pieces
+        where = (dict(edge_before=s.edge.at) if wall else
+                 dict(edge_after=s.edge.at if s.edge is not None else None, fallback=True))
+        r = read_stretch(q, c, t, s.start, s.stop, s.direction, from_reversal=True, noise=noise, ring_s=ring_s,
+                         **where)
         if r.edge is not None and LOADED_SHARE * ref <= r.edge.after <= LOADED_BAND * ref and not (
                 wall and abs(r.edge.before) >= 0.5 * DEAD_SHARE * r.edge.after):
             again[i] = r
