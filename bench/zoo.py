@@ -46,7 +46,10 @@ What counts, per case:
   identify refuses apart (no true-loop stand-in).
 
 Run: ``python bench/zoo.py`` (500 sweeps and 500 replays, several minutes on 2 cores); ``--n``,
-``--seed``, ``--only identify|shift|live``, ``--straight tip|current``.
+``--seed``, ``--only identify|shift|live``, ``--straight tip|current``; ``--jobs 2`` scores the
+cases over two processes (the same figures); ``--cases FILE`` writes every scored case as a JSON
+line, and ``bench/zoo_compare.py A B`` lists the records whose outcome or estimate differ between
+two such files (two codes, record by record).
 """
 from __future__ import annotations
 
@@ -154,47 +157,81 @@ def current_cannot_fix(case: plants.SweepCase) -> set[str]:
     return ({"d_pos", "d_neg"} - shown) | capped
 
 
-def bench_identify(n: int, seed: int, use_tip: bool) -> None:
+def run_cases(score, seeds: range, jobs: int, *args):  # noqa: ANN001, ANN201 - an iterator of dicts
+    """``score(seed, *args)`` for every seed, in seed order, over ``jobs`` processes (each case is
+    generated from its seed alone, so the records are the same whatever ``jobs`` is)."""
+    if jobs <= 1:
+        for s in seeds:
+            yield score(s, *args)
+        return
+    from concurrent.futures import ProcessPoolExecutor
+    from functools import partial
+
+    with ProcessPoolExecutor(jobs) as pool:
+        yield from pool.map(partial(_call, score, args), seeds, chunksize=4)
+
+
+def _call(score, args: tuple, s: int) -> dict:  # noqa: ANN001
+    return score(s, *args)
+
+
+def score_identify(s: int, use_tip: bool) -> dict:
+    """One sweep of the zoo through ``identify``, scored on the plant's truth (a JSON-able record:
+    its seed, family, outcome, and what identify returned or why it refused)."""
     tol = 0.5 if use_tip else 1.0
+    case = plants.sweep_case(s, tip=use_tip)
+    fam = case.family
+    run = parse_run(case.record.csv_text(), source=f"zoo-{s}")
+    # the loop's own limits (edges passed, plateaus left) hold for the current too; a current
+    # that does not carry the backlash cannot give it
+    unfixed, sliding = truth_can_fix(case)
+    if not use_tip and not case.current_shows_backlash:
+        unfixed |= {"b_pos", "b_neg"}
+    if not use_tip:
+        unfixed |= current_cannot_fix(case)
+    truth = case.truth.as_dict()
+    rec: dict = {"seed": s, "family": fam, "tip": use_tip, "truth": {p: truth[p] for p in PARAMS},
+                 "unfixed": sorted(unfixed)}
+    try:
+        fit = identify(run, use_tip=use_tip).fits[1]
+    except HystError as exc:
+        rec["outcome"] = "refused, rightly" if unfixed else "refused, wrongly"
+        rec["message"] = str(exc)
+        # a current that unloads at once after a reversal is what a backlash narrower than
+        # the current can resolve gives, and what a stretch law gives for any backlash: the
+        # wrong refusals of a narrow backlash are counted apart (still wrong)
+        tr = case.truth
+        rec["narrow_b"] = bool(not unfixed and not use_tip and "shows no backlash plateau" in str(exc)
+                               and all(getattr(tr, b) < 1.0 for b in ("b_pos", "b_neg") if b in str(exc)))
+        return rec
+    # parameters identify leaves without an uncertainty (an edge it warns it cannot place,
+    # and what moves with it) are not claimed: not judged
+    judged = [p for p in PARAMS if p in fit.stderr]
+    params = fit.model.params()
+    e = {p: params[p] - truth[p] for p in judged}
+    rec.update(outcome="success" if all(abs(v) <= tol for v in e.values()) else "silent failure",
+               warned=bool(fit.warnings), params={p: params[p] for p in PARAMS},
+               stderr={p: fit.stderr[p] for p in judged}, error=e)
+    return rec
+
+
+def bench_identify(n: int, seed: int, use_tip: bool, jobs: int = 1, cases: list | None = None) -> None:
     stats: dict = defaultdict(lambda: defaultdict(int))
     errs: dict = defaultdict(lambda: defaultdict(list))
     cover: list[bool] = []
     t0 = time.perf_counter()
-    for s in range(seed, seed + n):
-        case = plants.sweep_case(s, tip=use_tip)
-        fam = case.family
-        run = parse_run(case.record.csv_text(), source=f"zoo-{s}")
-        # the loop's own limits (edges passed, plateaus left) hold for the current too; a current
-        # that does not carry the backlash cannot give it
-        unfixed, sliding = truth_can_fix(case)
-        if not use_tip and not case.current_shows_backlash:
-            unfixed |= {"b_pos", "b_neg"}
-        if not use_tip:
-            unfixed |= current_cannot_fix(case)
-        try:
-            fit = identify(run, use_tip=use_tip).fits[1]
-        except HystError as exc:
-            stats[fam]["refused, rightly" if unfixed else "refused, wrongly"] += 1
-            # a current that unloads at once after a reversal is what a backlash narrower than
-            # the current can resolve gives, and what a stretch law gives for any backlash: the
-            # wrong refusals of a narrow backlash are counted apart (still wrong)
-            tr = case.truth
-            if (not unfixed and not use_tip and "shows no backlash plateau" in str(exc)
-                    and all(getattr(tr, b) < 1.0 for b in ("b_pos", "b_neg") if b in str(exc))):
-                stats[fam]["wrongly, narrow b"] += 1
-            continue
-        truth = case.truth.as_dict()
-        # parameters identify leaves without an uncertainty (an edge it warns it cannot place,
-        # and what moves with it) are not claimed: not judged
-        judged = [p for p in PARAMS if p in fit.stderr]
-        if fit.warnings:
+    for rec in run_cases(score_identify, range(seed, seed + n), jobs, use_tip):
+        if cases is not None:
+            cases.append(rec)
+        fam = rec["family"]
+        stats[fam][rec["outcome"]] += 1
+        if rec.get("narrow_b"):
+            stats[fam]["wrongly, narrow b"] += 1
+        if rec.get("warned"):
             stats[fam]["warned"] += 1
-        e = {p: fit.model.params()[p] - truth[p] for p in judged}
-        ok = all(abs(v) <= tol for v in e.values())
-        stats[fam]["success" if ok else "silent failure"] += 1
-        for p, v in e.items():
+        for p, v in rec.get("error", {}).items():
             errs[fam][p].append(abs(v))
-            cover.append(abs(v) <= 2 * fit.stderr[p])
+            cover.append(abs(v) <= 2 * rec["stderr"][p])
     dt = time.perf_counter() - t0
     label = "tip angle" if use_tip else "current only"
     print(f"\nidentify ({label}), {n} zoo sweeps from seed {seed}, {dt:.1f} s "
@@ -401,7 +438,49 @@ def straight_model(case: plants.ReplayCase, use_tip: bool = True) -> tuple[Model
         return Model({1: km}, identification={1: current_levels(run, 1, km)}), "true loop"
 
 
-def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
+def score_shift(s: int, use_tip: bool = True) -> dict:
+    """One replay of the zoo through ``detect_shift``, scored on the plant's truth (a JSON-able
+    record: its seed, family, the straight model's source, reach, and the outcome)."""
+    case = plants.replay_case(s)
+    fam = case.family
+    rec: dict = {"seed": s, "family": fam, "truth": case.offset, "straight": "tip" if use_tip else "current"}
+    model, how = straight_model(case, use_tip)
+    rec["how"] = how
+    if model is None:
+        rec["outcome"] = "identify refused"
+        return rec
+    rep = parse_run(case.replay.csv_text(), source=f"replay-{s}")
+    travel = shift.default_max_travel(model, 1)
+    q = np.asarray(rep["q1"], float)
+    reach = edge_reachable(case, q, travel)
+    back_only = not reach and walk_back_reachable(case, q, travel)
+    rec.update(key="reach" if reach or back_only else "beyond", back_only=back_only,
+               slack=bool(back_only and starts_slack(case, q)))
+    # whether the truth's readings could place the edge at all, and whether the model has it
+    why_not = None
+    if reach:
+        if model_lacks_edge(model, case, q):
+            why_not = "model"
+        elif edge_placeable_se(case, rep, travel) > PLACEABLE_SE:
+            why_not = "readings"
+    rec["why_not"] = why_not
+    try:
+        r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
+    except HystError as exc:
+        rec.update(outcome="refused", message=str(exc))
+        return rec
+    e = r.offset - case.offset
+    rec.update(offset=r.offset, error=e, edge=r.edge, walked_back=r.walked_back)
+    # the offset's own standard error: its kink's and its model edge's (identify's), combined
+    ident = (model.identification or {}).get(1)
+    m_se = (ident.stderr.get(f"d_{r.edge}", 0.0) if ident is not None and ident.stderr else 0.0)
+    if r.evidence is not None:
+        rec["se"] = math.hypot(r.evidence.edge_se, m_se)
+    rec["outcome"] = "ok" if abs(e) <= 0.5 else ("0.5-2 deg" if abs(e) <= 2.0 else "silent > 2 deg")
+    return rec
+
+
+def bench_shift(n: int, seed: int, use_tip: bool = True, jobs: int = 1, cases: list | None = None) -> None:
     stats: dict = defaultdict(lambda: defaultdict(int))
     errs: list[float] = []
     nulls: list[float] = []
@@ -409,59 +488,40 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
     unplaceable: dict = defaultdict(int)
     cover: list[bool] = []
     t0 = time.perf_counter()
-    for s in range(seed, seed + n):
-        case = plants.replay_case(s)
-        fam = case.family
-        model, how = straight_model(case, use_tip)
-        if model is None:
-            stats[fam]["identify refused"] += 1
+    for rec in run_cases(score_shift, range(seed, seed + n), jobs, use_tip):
+        if cases is not None:
+            cases.append(rec)
+        fam, out = rec["family"], rec["outcome"]
+        if out == "identify refused":
+            stats[fam][out] += 1
             continue
-        rep = parse_run(case.replay.csv_text(), source=f"replay-{s}")
-        travel = shift.default_max_travel(model, 1)
-        q = np.asarray(rep["q1"], float)
-        reach = edge_reachable(case, q, travel)
-        back_only = not reach and walk_back_reachable(case, q, travel)
-        key = "reach" if reach or back_only else "beyond"
-        if back_only and starts_slack(case, q):
+        key, back_only, why_not = rec["key"], rec["back_only"], rec["why_not"]
+        if rec["slack"]:
             unplaceable["back, slack"] += 1
-        # whether the truth's readings could place the edge at all, and whether the model has it
-        why_not = None
-        if reach:
-            if model_lacks_edge(model, case, q):
-                why_not = "model"
-            elif edge_placeable_se(case, rep, travel) > PLACEABLE_SE:
-                why_not = "readings"
-        try:
-            r = shift.detect_shift(model, shift.ReplayProbe(rep, 1), 1)
-        except HystError:
+        if out == "refused":
             stats[fam][f"refused ({key})"] += 1
             if back_only:
                 unplaceable["back, refused"] += 1
             if why_not:
                 unplaceable[f"refused, {why_not}"] += 1
             continue
-        e = r.offset - case.offset
-        if case.offset == 0.0:
-            nulls.append(abs(r.offset))
-        # the offset's own standard error: its kink's and its model edge's (identify's), combined
-        ident = (model.identification or {}).get(1)
-        m_se = (ident.stderr.get(f"d_{r.edge}", 0.0) if ident is not None and ident.stderr else 0.0)
-        if r.evidence is not None:
-            cover.append(abs(e) <= 2.0 * math.hypot(r.evidence.edge_se, m_se))
+        e = rec["error"]
+        errs.append(abs(e))
+        if rec["truth"] == 0.0:
+            nulls.append(abs(rec["offset"]))
+        if "se" in rec:
+            cover.append(abs(e) <= 2.0 * rec["se"])
         if back_only:
             unplaceable["back, " + ("ok" if abs(e) <= 0.5 else "off")] += 1
-        if abs(e) <= 0.5:
+        if out == "ok":
             stats[fam][f"ok ({key})"] += 1
-            errs.append(abs(e))
             if why_not:
                 unplaceable[f"ok, {why_not}"] += 1
-        elif abs(e) <= 2.0:
-            stats[fam]["0.5-2 deg"] += 1
-            errs.append(abs(e))
         else:
-            stats[fam]["silent > 2 deg"] += 1
-            silent.append(f"seed {s} ({fam}, {how}): offset {r.offset:+.2f}, true {case.offset:+.2f}")
-            errs.append(abs(e))
+            stats[fam][out] += 1
+            if out == "silent > 2 deg":
+                silent.append(f"seed {rec['seed']} ({fam}, {rec['how']}): offset {rec['offset']:+.2f}, "
+                              f"true {rec['truth']:+.2f}")
     dt = time.perf_counter() - t0
     cols = ("ok (reach)", "refused (reach)", "ok (beyond)", "refused (beyond)", "0.5-2 deg", "silent > 2 deg") + (
         () if use_tip else ("identify refused",))
@@ -511,7 +571,7 @@ def bench_shift(n: int, seed: int, use_tip: bool = True) -> None:
         print("  silent: " + line)
 
 
-def bench_live(n: int, seed: int) -> None:
+def bench_live(n: int, seed: int, cases: list | None = None) -> None:
     """The live path: ``hyst sim-robot --zoo`` behind a real pty, ``hyst detect-shift --port``."""
     sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
     import tempfile
@@ -535,12 +595,19 @@ def bench_live(n: int, seed: int) -> None:
             with sim_robot("--zoo", f"{s}:{case.family}:{case.offset!r}") as port:
                 res = runner.invoke(app, ["detect-shift", "--model", str(mp), "--port", port, "-o", str(out),
                                           "--timeout", "10", "-q"])
+            rec: dict = {"seed": s, "family": case.family, "live": True, "truth": case.offset}
             if res.exit_code != 0:
                 counts["refused"] += 1
-                continue
-            e = abs(load_model(out).knob(1).offset - case.offset)
-            errs.append(e)
-            counts["ok" if e <= 0.5 else ("0.5-2 deg" if e <= 2 else "silent > 2 deg")] += 1
+                rec.update(outcome="refused", message=res.output.strip().splitlines()[-1:])
+            else:
+                offset = load_model(out).knob(1).offset
+                e = abs(offset - case.offset)
+                errs.append(e)
+                rec.update(offset=offset, error=offset - case.offset,
+                           outcome="ok" if e <= 0.5 else ("0.5-2 deg" if e <= 2 else "silent > 2 deg"))
+                counts[rec["outcome"]] += 1
+            if cases is not None:
+                cases.append(rec)
     dt = time.perf_counter() - t0
     print(f"\nlive detect-shift (sim-robot --zoo over a pty), {n} plants from seed {seed}, {dt:.0f} s: "
           + ", ".join(f"{k} {v}" for k, v in sorted(counts.items()))
@@ -554,14 +621,26 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", choices=("identify", "shift", "live"), default=None)
     ap.add_argument("--straight", choices=("tip", "current"), default="tip",
                     help="how the shift bench identifies the straight model (default: the tip fit)")
+    ap.add_argument("--jobs", type=int, default=1,
+                    help="processes scoring cases (the same figures for any number; live runs alone)")
+    ap.add_argument("--cases", type=Path, default=None,
+                    help="also write every scored case as a JSON line here (seed, family, outcome, "
+                         "estimate, error, refusal message), for comparing two codes record by record")
     args = ap.parse_args(argv)
+    cases: list | None = [] if args.cases is not None else None
     if args.only in (None, "identify"):
-        bench_identify(args.n, args.seed, use_tip=True)
-        bench_identify(args.n, args.seed, use_tip=False)
+        bench_identify(args.n, args.seed, use_tip=True, jobs=args.jobs, cases=cases)
+        bench_identify(args.n, args.seed, use_tip=False, jobs=args.jobs, cases=cases)
     if args.only in (None, "shift"):
-        bench_shift(args.n, args.seed, use_tip=args.straight == "tip")
+        bench_shift(args.n, args.seed, use_tip=args.straight == "tip", jobs=args.jobs, cases=cases)
     if args.only in (None, "live"):
-        bench_live(min(args.n, 40), args.seed)
+        bench_live(min(args.n, 40), args.seed, cases=cases)
+    if cases is not None:
+        import json
+
+        with open(args.cases, "w") as f:
+            for rec in cases:
+                f.write(json.dumps(rec, default=float) + "\n")
     return 0
 
 
