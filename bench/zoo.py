@@ -39,14 +39,17 @@ What counts, per case:
   more than 0.5 deg off count against both rates, whatever the information.
 
 * **live**: the same replay plants served by ``hyst sim-robot --zoo`` behind a pseudo-terminal and
-  searched by ``hyst detect-shift --port`` (the first 40 of ``--n``).
+  searched by ``hyst detect-shift --port`` (the first 40 of ``--n``). ``--only live-direct``
+  searches all ``--n`` of them with the same device driver, probe, codec and emulator, the bytes
+  passed in memory instead of through a pty (:class:`EmulatorPort`): forty plants show a silent
+  failure rate of one in a few hundred no better than none.
 
 * ``--straight current``: the shift bench identifies the straight model from the sweep's motor
   current alone (the paper's protocol) instead of the tip fit, and counts the plants whose sweep
   identify refuses apart (no true-loop stand-in).
 
 Run: ``python bench/zoo.py`` (500 sweeps and 500 replays, several minutes on 2 cores); ``--n``,
-``--seed``, ``--only identify|shift|live``, ``--straight tip|current``; ``--jobs 2`` scores the
+``--seed``, ``--only identify|identify-tip|identify-current|shift|live``, ``--straight tip|current``; ``--jobs 2`` scores the
 cases over two processes (the same figures); ``--cases FILE`` writes every scored case as a JSON
 line, and ``bench/zoo_compare.py A B`` lists the records whose outcome or estimate differ between
 two such files (two codes, record by record).
@@ -614,11 +617,106 @@ def bench_live(n: int, seed: int, cases: list | None = None) -> None:
           + (f"; median |error| {np.median(errs):.3f} deg, worst {max(errs):.2f}" if errs else ""))
 
 
+class EmulatorPort:
+    """A byte pipe to a :class:`hystcli.emulator.DeviceEmulator` in this process: what the host
+    writes is handed to the emulator line by line, its replies are read back (their latency
+    dropped). Below the transport only: the host's :class:`hystcli.device.Device` and
+    :class:`~hystcli.device.DeviceProbe`, the protocol codec and the emulator are the ones the pty
+    path runs, so the search makes the same decisions on the same samples, many times faster."""
+
+    def __init__(self, emulator) -> None:  # noqa: ANN001 - hystcli.emulator.DeviceEmulator
+        self.emulator = emulator
+        self.timeout = 0.05
+        self.name = "emulator"
+        self._in = bytearray()
+        self._out = bytearray()
+
+    @property
+    def in_waiting(self) -> int:
+        return len(self._out)
+
+    def write(self, data: bytes) -> int:
+        self._in.extend(data)
+        while (nl := self._in.find(b"\n")) >= 0:
+            line = bytes(self._in[:nl + 1])
+            del self._in[:nl + 1]
+            for reply, _ in self.emulator.handle_line(line):
+                self._out.extend(reply)
+        return len(data)
+
+    def read(self, n: int = 1) -> bytes:
+        chunk = bytes(self._out[:n])
+        del self._out[:n]
+        return chunk
+
+    def reset_input_buffer(self) -> None:
+        self._out.clear()
+
+
+def score_live_direct(s: int) -> dict:
+    """One replay plant searched live as ``hyst detect-shift --port`` searches it against
+    ``hyst sim-robot --zoo`` (the CLI's probe options), over :class:`EmulatorPort` instead of a
+    pty, scored on the plant's truth."""
+    from hystcli import device
+    from hystcli.emulator import DeviceEmulator
+
+    case = plants.replay_case(s)
+    model, how = straight_model(case)
+    plant, _ = plants.live_plant(s, case.family, offset=case.offset)
+    rec: dict = {"seed": s, "family": case.family, "live": True, "direct": True, "truth": case.offset, "how": how}
+    dev = device.Device(EmulatorPort(DeviceEmulator(plant)), timeout=10.0)
+    probe = device.DeviceProbe(dev, 1, current_ceiling=2000.0, speed=5.0)
+    try:
+        r = shift.detect_shift(model, probe, 1)
+    except HystError as exc:
+        rec.update(outcome="refused", message=str(exc))
+        return rec
+    e = r.offset - case.offset
+    rec.update(offset=r.offset, error=e, edge=r.edge,
+               outcome="ok" if abs(e) <= 0.5 else ("0.5-2 deg" if abs(e) <= 2.0 else "silent > 2 deg"))
+    return rec
+
+
+def bench_live_direct(n: int, seed: int, jobs: int = 1, cases: list | None = None) -> None:
+    """The live search's decisions on many plants: :func:`score_live_direct` per seed."""
+    counts: dict = defaultdict(lambda: defaultdict(int))
+    errs: list[float] = []
+    silent: list[str] = []
+    t0 = time.perf_counter()
+    for rec in run_cases(score_live_direct, range(seed, seed + n), jobs):
+        if cases is not None:
+            cases.append(rec)
+        counts[rec["family"]][rec["outcome"]] += 1
+        if "error" in rec:
+            errs.append(abs(rec["error"]))
+        if rec["outcome"] == "silent > 2 deg":
+            silent.append(f"seed {rec['seed']} ({rec['family']}, {rec['how']}): offset {rec['offset']:+.2f}, "
+                          f"true {rec['truth']:+.2f}")
+    dt = time.perf_counter() - t0
+    cols = ("ok", "refused", "0.5-2 deg", "silent > 2 deg")
+    print(f"\nlive detect-shift, the emulator in process (the pty's device, probe and codec; "
+          f"--only live runs the pty), {n} plants from seed {seed}, {dt:.0f} s")
+    print(f"{'family':18s} " + " ".join(f"{c:>15s}" for c in cols))
+    total: dict = defaultdict(int)
+    for fam in sorted(counts):
+        for k, v in counts[fam].items():
+            total[k] += v
+        print(f"{fam:18s} " + " ".join(f"{counts[fam][c]:>15d}" for c in cols))
+    print(f"{'all':18s} " + " ".join(f"{total[c]:>15d}" for c in cols))
+    if errs:
+        print(f"median |error| {np.median(errs):.3f} deg, worst {max(errs):.2f}")
+    for line in silent:
+        print("  silent: " + line)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=500)
     ap.add_argument("--seed", type=int, default=100_000)
-    ap.add_argument("--only", choices=("identify", "shift", "live"), default=None)
+    ap.add_argument("--only", choices=("identify", "identify-tip", "identify-current", "shift", "live",
+                                       "live-direct"),
+                    default=None, help="one part (identify: both its benches; live-direct: the live search "
+                                       "over the emulator in process, --n plants, not part of the default run)")
     ap.add_argument("--straight", choices=("tip", "current"), default="tip",
                     help="how the shift bench identifies the straight model (default: the tip fit)")
     ap.add_argument("--jobs", type=int, default=1,
@@ -628,13 +726,16 @@ def main(argv: list[str] | None = None) -> int:
                          "estimate, error, refusal message), for comparing two codes record by record")
     args = ap.parse_args(argv)
     cases: list | None = [] if args.cases is not None else None
-    if args.only in (None, "identify"):
+    if args.only in (None, "identify", "identify-tip"):
         bench_identify(args.n, args.seed, use_tip=True, jobs=args.jobs, cases=cases)
+    if args.only in (None, "identify", "identify-current"):
         bench_identify(args.n, args.seed, use_tip=False, jobs=args.jobs, cases=cases)
     if args.only in (None, "shift"):
         bench_shift(args.n, args.seed, use_tip=args.straight == "tip", jobs=args.jobs, cases=cases)
     if args.only in (None, "live"):
         bench_live(min(args.n, 40), args.seed, cases=cases)
+    if args.only == "live-direct":
+        bench_live_direct(args.n, args.seed, jobs=args.jobs, cases=cases)
     if cases is not None:
         import json
 
