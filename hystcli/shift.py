@@ -701,6 +701,7 @@ class _Search:
         self.seg_c: list[float] = []
         self.seg_from_start = True
         self.seg_back = False        # the segment walks back from where the search was stopped (_walk)
+        self.from_taut = False       # the segment heads from a taut tendon into the dead zone
         self.contacts: list[float] = []
         self.start_outside = False
         self.turned = False          # began slack, met a taut tendon with no edge, turned round
@@ -762,8 +763,11 @@ class _Search:
         self.ready = None
         self.waiting = None
         self.seg_q, self.seg_c = [], []
-        self.seg_from_start = False
+        # a turn before the first step (a robot whose reading at rest showed a taut tendon)
+        # leaves the search where it began: its first segment is still from the start
+        self.seg_from_start = self.seg_from_start and self.steps == 0
         self.seg_back = False
+        self.from_taut = False
         self.ready_log = []
 
     # -- the level ----------------------------------------------------------------------------
@@ -784,6 +788,7 @@ class _Search:
         self.start_outside = True
         if self.dir == side:
             self._reverse()
+        self.from_taut = True
 
     # -- deciding -----------------------------------------------------------------------------
     def _judge(self, kink, *, min_after: int = AFTER_STEPS,  # noqa: ANN001 - hystcli.current.Kink
@@ -960,6 +965,14 @@ class _Search:
         before, own = self._before_kink(kink)
         if before.size == 0 or kink.after <= 0:
             return False
+        # the readings before it climbing at a taut tendon's slope are a tendon loading, whatever
+        # their level: at rest the band holds the motor's whole static friction, and a band that
+        # wide holds a loaded climb too (live design plant 1411: readings climbing 3.7 mA/deg for
+        # 5 deg inside a band of +-83 mA, a stiction step at their end read as an edge with one
+        # flat reading, 15.6 deg off at exit 0)
+        q_before = np.array(self.seg_q)[self.dir * (np.array(self.seg_q) - kink.at) < 0]
+        if before.size >= AFTER_STEPS and self.dir * _ls_slope(q_before, before) >= self.th.eps_lower:
+            return False
         if before.size > 1:
             # the burst's tail: readings off the band on the loading side of the no-load level that
             # fall back toward it as the knob moves on, which no tendon ahead does (design replay
@@ -1006,9 +1019,10 @@ class _Search:
         return refit.before * self.dir * (refit.at - float(q[0])) <= allowed
 
     def _after_taut_start(self) -> bool:
-        """Whether the segment is the one a taut start turned into: it crosses the dead zone from
-        the tendon the search began on (no contact, no turn from a slack start, no walk back)."""
-        return (self.start_outside and not self.turned and not self.seg_from_start and not self.seg_back
+        """Whether the segment is the one a taut start heads into: it crosses the dead zone from
+        the tendon the search began on (no contact, no turn from a slack start, no walk back),
+        whether the search had to turn round for it or was already pointed that way."""
+        return (self.start_outside and not self.turned and self.from_taut and not self.seg_back
                 and not self.contacts)
 
     def _flat_after_unloading(self, kink, noise: float) -> bool:  # noqa: ANN001 - hystcli.current.Kink
