@@ -665,8 +665,9 @@ def score_live_direct(s: int) -> dict:
     plant, _ = plants.live_plant(s, case.family, offset=case.offset)
     rec: dict = {"seed": s, "family": case.family, "live": True, "direct": True, "truth": case.offset, "how": how}
     dev = device.Device(EmulatorPort(DeviceEmulator(plant)), timeout=10.0)
-    probe = device.DeviceProbe(dev, 1, current_ceiling=2000.0, speed=5.0)
     try:
+        # the probe reads the knob at rest first: a current past the ceiling stops it there
+        probe = device.DeviceProbe(dev, 1, current_ceiling=2000.0, speed=5.0)
         r = shift.detect_shift(model, probe, 1)
     except HystError as exc:
         rec.update(outcome="refused", message=str(exc))
