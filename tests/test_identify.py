@@ -1329,3 +1329,23 @@ def test_current_only_a_faint_kink_on_one_stretch_carries_an_honest_uncertainty(
         assert abs(at - getattr(case.truth, name)) > 0.5
         assert fit.stderr[name] >= KINK_SPAN / ks[0].clarity
         assert abs(at - getattr(case.truth, name)) <= 2 * fit.stderr[name]
+
+
+def test_a_cogging_ripple_is_read_on_the_knobs_dead_zone_where_the_tips_flats_are_short():
+    # held-out zoo replay 4800006's straight sweep (hystcli.zoo.plants, coulomb-viscous: a cogging
+    # ripple of 1.446 mA every 3.0015 deg of knob, the plant's drawn factors): backlash plateaus of
+    # 4.9 and 2.0 deg in an 11.8-deg dead zone leave the tip's flats 3 deg long, one period, where
+    # no ripple is read; the knob's dead zone holds four
+    from hystcli.identify import current_levels
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.replay_case(4800006)
+    law, tr = case.factors["sweep"], case.truth
+    run = parse_run(case.straight_sweep.csv_text(), source="straight-4800006")
+    km = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
+                   h_pos=tr.h_pos, h_neg=tr.h_neg)
+    ripple = current_levels(run, 1, km).ripple
+    assert ripple is not None
+    assert ripple.period == pytest.approx(law["ripple_period"], rel=0.02)
+    assert math.hypot(ripple.sin, ripple.cos) == pytest.approx(law["ripple_amp"], rel=0.1)

@@ -547,6 +547,16 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
     flat = slack & on_flat & (dq != 0)
     if flat.sum() >= 60:
         ripple = cogging_ripple(q[flat], c[flat], (dq[flat] < 0).astype(int))
+    if ripple is None:
+        # the knob's whole dead zone: where wide backlash plateaus leave the tip's flats too short
+        # for a period or two (held-out zoo 4800006's sweep: flats of 3 deg against a 3-deg
+        # ripple of 1.4 mA, none read on them, 4.4 periods of it across the knob's dead zone; the
+        # live search took a trough of it on a loaded line for the edge, 11.4 deg off at exit 0).
+        # A load the current holds on a plateau there is a step, no period: the ripple's own
+        # tests (the same wave both ways, most of the variance) refuse what it spoils
+        wide = (q >= lo) & (q <= hi) & (dq != 0)
+        if wide.sum() >= 60 and wide.sum() > flat.sum():
+            ripple = cogging_ripple(q[wide], c[wide], (dq[wide] < 0).astype(int))
     slope_dz = _dead_zone_slope(q, c if ripple is None else c - ripple(q), chk, lo, hi)
     noise = reading.noise if reading is not None else None
     return KnobIdentification(
