@@ -965,14 +965,7 @@ class _Search:
         before, own = self._before_kink(kink)
         if before.size == 0 or kink.after <= 0:
             return False
-        # the readings before it climbing at a taut tendon's slope are a tendon loading, whatever
-        # their level: at rest the band holds the motor's whole static friction, and a band that
-        # wide holds a loaded climb too (live design plant 1411: readings climbing 3.7 mA/deg for
-        # 5 deg inside a band of +-83 mA, a stiction step at their end read as an edge with one
-        # flat reading, 15.6 deg off at exit 0)
         q_before = np.array(self.seg_q)[self.dir * (np.array(self.seg_q) - kink.at) < 0]
-        if before.size >= AFTER_STEPS and self.dir * _ls_slope(q_before, before) >= self.th.eps_lower:
-            return False
         if before.size > 1:
             # the burst's tail: readings off the band on the loading side of the no-load level that
             # fall back toward it as the knob moves on, which no tendon ahead does (design replay
@@ -981,7 +974,14 @@ class _Search:
             while (k < before.size - 1 and self.dir * (before[k] - c0) > band_own
                    and abs(before[k] - c0) < abs(before[k - 1] - c0)):
                 k += 1
-            before = before[k:]
+            before, q_before = before[k:], q_before[k:]
+        # the readings before it climbing at a taut tendon's slope are a tendon loading, whatever
+        # their level: at rest the band holds the motor's whole static friction, and a band that
+        # wide holds a loaded climb too (live design plant 1411: readings climbing 3.7 mA/deg for
+        # 5 deg inside a band of +-83 mA, a stiction step at their end read as an edge with one
+        # flat reading, 15.6 deg off at exit 0)
+        if before.size >= AFTER_STEPS and self.dir * _ls_slope(q_before, before) >= self.th.eps_lower:
+            return False
         return bool(abs(kink.level - c0) <= band_own and np.all(np.abs(before - c0) <= band_own)
                     and self._pinned(kink, own))
 
