@@ -953,9 +953,10 @@ class _Search:
         stretch from where a slack search began (no taut start, turn or contact), the kink's level
         and every reading before it (but the first, where a stiction burst may sit, unless it is
         the only one, and the burst's tail after it) within the kink's own no-load band
-        (:meth:`_level_bands`), and the loaded
-        line meeting the mean level of the kink's flat readings within :data:`MAX_OFFSET_SE` of
-        the kink."""
+        (:meth:`_level_bands`), those readings (at least :data:`AFTER_STEPS`, after the burst's
+        tail) not climbing toward the side ahead at a taut tendon's slope (``eps_lower``), and the
+        loaded line meeting the mean level of the kink's flat readings within
+        :data:`MAX_OFFSET_SE` of the kink."""
         if not self.seg_from_start or self.start_outside or self.contacts:
             return False
         c0 = self.th.no_load(self.dir, self.moving)[0]

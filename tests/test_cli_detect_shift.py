@@ -165,11 +165,13 @@ def test_the_readme_walk_through_steps_1_and_2(tmp_path):
 
 
 def test_an_offset_from_the_sweeps_current_says_so(tmp_path):
-    # zoo design plant 730 (examined in stop 34): its straight sweep's tip fit cannot place
+    # zoo design plant 831 (examined in stop 34): its straight sweep's tip fit cannot place
     # d_pos, its current does; through the CLI as a user runs it, identify then detect-shift
+    # (730 until stop 41: which of its fit's near-equal optima wins depends on numpy's SIMD
+    # kernels, tests/test_shift_zoo.py)
     from hystcli.zoo import plants
 
-    case = plants.replay_case(730)
+    case = plants.replay_case(831)
     (tmp_path / "sweep.csv").write_text(case.straight_sweep.csv_text())
     (tmp_path / "replay.csv").write_text(case.replay.csv_text())
     mp = tmp_path / "model.json"

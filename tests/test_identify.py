@@ -1349,3 +1349,22 @@ def test_a_cogging_ripple_is_read_on_the_knobs_dead_zone_where_the_tips_flats_ar
     assert ripple is not None
     assert ripple.period == pytest.approx(law["ripple_period"], rel=0.02)
     assert math.hypot(ripple.sin, ripple.cos) == pytest.approx(law["ripple_amp"], rel=0.1)
+
+
+def test_a_wave_of_fewer_than_three_periods_on_the_knobs_dead_zone_is_no_cogging():
+    # design replay 3900435's straight sweep (hystcli.zoo.plants, a stiffening cable holding the
+    # tip's load on backlash plateaus of 14.2 and 10.7 deg in a 22.5-deg dead zone; the plant
+    # draws no cogging: ripple_amp 0): on the knob's whole dead zone the held loads and the
+    # stiffening bend fit a 16-mA wave every 13.5 deg, 1.6 periods of it, both ways alike. Taken
+    # for cogging it moved detect-shift's offset from 0.15 to 0.32 deg off
+    from hystcli.identify import current_levels
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    case = plants.replay_case(3900435)
+    assert case.factors["sweep"]["ripple_amp"] == 0.0
+    tr = case.truth
+    run = parse_run(case.straight_sweep.csv_text(), source="straight-3900435")
+    km = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
+                   h_pos=tr.h_pos, h_neg=tr.h_neg)
+    assert current_levels(run, 1, km).ripple is None

@@ -552,11 +552,16 @@ def _levels(q: np.ndarray, c: np.ndarray, t: np.ndarray, model: KnobModel, fit: 
         # for a period or two (held-out zoo 4800006's sweep: flats of 3 deg against a 3-deg
         # ripple of 1.4 mA, none read on them, 4.4 periods of it across the knob's dead zone; the
         # live search took a trough of it on a loaded line for the edge, 11.4 deg off at exit 0).
-        # A load the current holds on a plateau there is a step, no period: the ripple's own
-        # tests (the same wave both ways, most of the variance) refuse what it spoils
+        # A load the current holds on a plateau there is a step, and a current that bends once
+        # across the dead zone fits a wave of one or two periods as well as cogging does (design
+        # replay 3900435's sweep, a stiffening cable with plateaus of 14 and 11 deg and no
+        # cogging: a "ripple" of 16 mA every 13.5 deg): as where the current is read again
+        # without its ripple, it is taken over at least REREAD_PERIODS periods only
         wide = (q >= lo) & (q <= hi) & (dq != 0)
         if wide.sum() >= 60 and wide.sum() > flat.sum():
             ripple = cogging_ripple(q[wide], c[wide], (dq[wide] < 0).astype(int))
+            if ripple is not None and ripple.period * REREAD_PERIODS > float(np.ptp(q[wide])):
+                ripple = None
     slope_dz = _dead_zone_slope(q, c if ripple is None else c - ripple(q), chk, lo, hi)
     noise = reading.noise if reading is not None else None
     return KnobIdentification(
