@@ -80,6 +80,22 @@ def ice_a_run(lo: float, hi: float, cycles: float = 2.0) -> Run:
     return twin.simulate(ICE_A, t, {1: q}, seed=3, effects=())
 
 
+def _fit_or_refusal(run: Run, knob: int = 1):
+    """identify's fit of ``knob``, or None where it refuses naming what the record cannot fix.
+
+    On records whose tip fit has near-equal optima (within a fraction of a percent in cost),
+    which one the local search lands on follows the platform's floating-point kernels (numpy's
+    SIMD dispatch: docs/zoo_history.md, "Stop 41"); on one the fit's degenerate directions leave
+    parameters unfixed and identify refuses, naming them. Both outcomes are honest; a test of
+    what must never be *claimed* takes either, and checks the claim where one is made.
+    """
+    try:
+        return identify(run).fits[knob]
+    except IdentificationError as e:
+        assert "cannot fix" in str(e), str(e)
+        return None
+
+
 # --------------------------------------------------------------------------------------------
 # Must-show 3: recovery of known parameters over many sets
 # --------------------------------------------------------------------------------------------
@@ -431,7 +447,13 @@ def test_further_starts_never_trade_a_whole_loop_for_a_degenerate_one():
     run = parse_run(case.sweep, source="zoo")
     q, y = np.asarray(run["q1"], float), np.asarray(run["y1"], float)
     first = fit_tip(q, y)
-    assert fit_tip(q, y, batches=4).unidentified and not first.unidentified
+    if first.unidentified:
+        # the platform's kernels landed the first search in a degenerate optimum of its own
+        # (_fit_or_refusal): then identify must refuse, naming it, not return a further start's
+        with pytest.raises(IdentificationError, match="cannot fix"):
+            identify(run, max_misfit=math.inf)
+        return
+    assert fit_tip(q, y, batches=4).unidentified
     fit = identify(run, max_misfit=math.inf).fits[1]
     for name in ("d_pos", "d_neg", "b_pos", "b_neg", "omega"):
         assert getattr(fit.model, name) == pytest.approx(getattr(first.model, name), abs=1e-6), name
@@ -469,6 +491,32 @@ def test_the_wall_threshold_sits_below_the_samples_the_wall_holds():
     held = y[(free > 5.0)]
     assert 5.0 - (WALL_HOLD + 0.5) * 0.1 <= top <= 5.0 - (WALL_HOLD - 0.5) * 0.1
     assert np.mean(held >= top) >= 0.95
+
+
+def test_a_wall_on_a_fast_sweep_is_censored_though_its_quarter_second_misfit_is_small():
+    from hystcli.identify import WALL_MISFIT, systematic_misfit
+    from hystcli.identify.tip import fit_tip
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # held-out plant 4900388 (examined after 4900000's figures, stop 43): a compliant wall at
+    # -5.7 deg of tip, swept at 57 deg/s and sampled at 73 Hz, so a quarter second spans 14 deg
+    # of knob and the plain fit's systematic misfit is under WALL_MISFIT; that fit bent the loop
+    # to the wall (omega 10 % low) and returned d_pos 0.57 and b_neg 0.65 deg off at +-0.07
+    case = plants.sweep_case(4900388)
+    assert case.family == "wall" and case.factors["speed"] > 50
+    run = parse_run(case.record.csv_text(), source="wall")
+    q, y = np.asarray(run["q1"], float), np.asarray(run["y1"], float)
+    plain = fit_tip(q, y)
+    assert systematic_misfit(plain.model.forward(q, float(y[0])) - y, run.sample_rate) < WALL_MISFIT
+    fit = identify(run).fits[1]
+    assert any("a wall holds the tip" in w for w in fit.warnings)
+    truth = case.truth.as_dict()
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
+        assert abs(getattr(fit.model, name) - truth[name]) <= 0.5, name
+        # the plant's truth within two of the stated standard errors (or 0.05 deg)
+        assert abs(getattr(fit.model, name) - truth[name]) <= max(2 * fit.stderr[name], 0.05), name
+    assert fit.model.omega == pytest.approx(truth["omega"], rel=0.02)
 
 
 def test_no_wall_on_a_free_loop_or_a_dead_zone_flat():
@@ -523,7 +571,9 @@ def test_an_edge_the_tip_and_the_current_place_apart_is_not_claimed_when_both_lo
     # well as the true one (RMS within 25 %), and the current reads the true edge: before, the
     # tip's d_neg was returned with a 0.06-deg uncertainty
     case = plants.sweep_case(seed)
-    fit = identify(parse_run(case.record.csv_text(), source="z")).fits[1]
+    fit = _fit_or_refusal(parse_run(case.record.csv_text(), source="z"))
+    if fit is None:     # refused, naming what it cannot fix: nothing claimed (see _fit_or_refusal)
+        return
     assert not {"d_neg", "b_pos", "b_neg"} & set(fit.stderr)
     # said either way: the current's edge fits as well, or (seed 471, heights 10 deg apart) the
     # fitted edge sits on a flat too narrow to fix it (FLAT_WIDTH)
@@ -616,7 +666,9 @@ def test_an_edge_on_a_flat_a_few_hundredths_wide_is_not_claimed():
     # well; that fit left d_neg on a 0.04-deg flat and claimed it to +-0.04 deg, 2.94 deg from
     # the truth (and detect-shift then measured from it)
     case = plants.sweep_case(1130)
-    fit = identify(parse_run(case.record.csv_text(), source="z")).fits[1]
+    fit = _fit_or_refusal(parse_run(case.record.csv_text(), source="z"))
+    if fit is None:     # refused, naming what it cannot fix: nothing claimed (see _fit_or_refusal)
+        return
     for name in ("d_pos", "d_neg"):
         if name in fit.stderr:
             assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 0.5, name
@@ -1020,7 +1072,9 @@ def test_a_flat_the_tip_sat_at_since_the_records_start_does_not_place_its_edge()
     # start and put d_pos 0.68 deg off (2.15, true 1.47) at +-0.01 deg: a start state held above
     # a lower flat, with the edge slid along the same loaded line, fits the record as well
     case = plants.sweep_case(1900387)
-    fit = identify(parse_run(case.record.csv_text(), source="z")).fits[1]
+    fit = _fit_or_refusal(parse_run(case.record.csv_text(), source="z"))
+    if fit is None:     # refused, naming what it cannot fix: nothing claimed (see _fit_or_refusal)
+        return
     assert "d_pos" not in fit.stderr
     assert any("d_pos is not fixed by this record" in w and "record's start" in w for w in fit.warnings)
     for name in ("d_neg", "omega"):
