@@ -530,15 +530,20 @@ def unloads_after_level(pieces, slopes, x, k: int, flat: float, sig: float) -> b
     return bool(unloads and abs(slopes[k - 1]) <= 0.15 * abs(slopes[k]) and span_before >= 1.0)
 
 
-def edge_piece(pieces, slopes, xb, sig) -> int | None:
+def edge_piece(pieces, slopes, xb, sig, *, corner: bool = False) -> int | None:
     """Index of the flat piece that the loading edge ends (see the module docstring)."""
-    ranked = edge_pieces(pieces, slopes, xb, sig)
+    ranked = edge_pieces(pieces, slopes, xb, sig, corner=corner)
     return ranked[0] if ranked else None
 
 
-def edge_pieces(pieces, slopes, xb, sig) -> list[int]:
+def edge_pieces(pieces, slopes, xb, sig, *, corner: bool = False) -> list[int]:
     """Every flat piece a loading edge may end, the likeliest first (:func:`edge_piece`'s choice:
-    the flattest start, of equals the later one)."""
+    the flattest start, of equals the later one).
+
+    With ``corner`` (a sweep's binned reading), a piece shorter than :data:`END_PIECE` between
+    the flat one and a steeper one is read as the edge's corner, its climb judged over both.
+    A stepping search's few readings keep the plain test: its pieces are a handful of probes,
+    where a short piece is a probe or two, not a corner."""
     n = len(pieces)
     if n < 2:
         return []
@@ -557,8 +562,16 @@ def edge_pieces(pieces, slopes, xb, sig) -> list[int]:
         if post <= 0 or abs(pre) > JUMP_RATIO * post:
             continue
         length = xb[pieces[j + 1][1] - 1] - xb[pieces[j + 1][0]] + 1e-9
+        climb = post * length
+        if corner and length < END_PIECE and j + 2 < n and slopes[j + 2] > post:
+            # a short piece between the flat and a steeper one is the corner (a bin or two
+            # straddling the edge, the law's rounding): the climb is read over both (zoo sweep
+            # 5000211: a 0.5-deg piece at 7 mA/deg before the loaded 18, the flat's edge dropped)
+            end = xb[pieces[j + 2][1] - 1]
+            climb += slopes[j + 2] * (end - xb[pieces[j + 2][0]]) + post * (xb[pieces[j + 2][0]] - xb[pieces[j + 1][1] - 1])
+            length = end - xb[pieces[j + 1][0]] + 1e-9
         # the piece after the jump must itself climb clearly: a loaded tendon, not a flat
-        if (post - pre) * length < 6 * sig or post * length < 6 * sig:
+        if climb - pre * length < 6 * sig or climb < 6 * sig:
             continue
         # nothing flat after it (a dead zone still to come means this was a tendon unloading);
         # a short last piece is the reversal's rounding, not a dead zone
@@ -582,7 +595,7 @@ def edge_pieces(pieces, slopes, xb, sig) -> list[int]:
 def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, minlen: int = 2,
                  resolution: float | None = None, strict_flat: bool = False,
                  select: bool = False, convex: bool = False, min_run: int = 0,
-                 fallback: bool = False) -> Kink | None:
+                 fallback: bool = False, corner: bool = False) -> Kink | None:
     """Where a tendon is taken up on one monotone stretch, or None when it shows no such kink.
 
     ``q, c`` are points along the motion (binned samples, or a stepping search's readings);
@@ -600,7 +613,8 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
     (:func:`kink_fit`). With ``min_run``, a steeper piece ends the loaded run (a wall) only after
     that many points of it: the fewest a caller needs past a kink to judge it. With ``fallback``,
     when the likeliest flat piece gives no clear kink, the next ones are tried in turn (a wall's
-    kink among them: the caller judges the loaded slope it finds).
+    kink among them: the caller judges the loaded slope it finds). ``corner`` is
+    :func:`edge_pieces`'.
     """
     q = np.asarray(q, float)
     c = np.asarray(c, float)
@@ -610,7 +624,7 @@ def loading_edge(q: np.ndarray, c: np.ndarray, direction: int, sig: float, *, mi
         return None
     pcs = pieces(x, c, minlen, sig if select else None)
     slopes = [d * m for (_, _, m, _) in pcs]
-    ranked = edge_pieces(pcs, slopes, x, sig)
+    ranked = edge_pieces(pcs, slopes, x, sig, corner=corner)
     for j in ranked[:None if fallback else 1]:
         kink = _edge_at(q, c, d, x, pcs, slopes, j, sig, minlen=minlen, resolution=resolution,
                         strict_flat=strict_flat, convex=convex, min_run=min_run)

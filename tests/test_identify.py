@@ -828,10 +828,18 @@ def test_current_only_refuses_an_edge_whose_dead_zone_is_a_curve(seed, name):
     # loaded slope or more and several times the other side's dead zone: no dead zone. (Design
     # seed 2010, a stiffening cable refused here for the same reason, 1.0 deg late, is now read
     # again around its kink and returned right: test_current_only_reads_a_stiffening_take_up...)
+    # Since stop 44 the true take-up, whose climb a short corner piece had split off
+    # (edge_pieces), is read instead: the kink between the loaded slopes is never returned; where
+    # no true take-up is read, the refusal gives the curve as the reason.
     case, run, reading = _zoo_reading(seed)
-    assert name in reading.doubts and name[2:] not in reading.edges
+    side = name[2:]
+    if side in reading.edges:
+        assert abs(reading.edges[side] - getattr(case.truth, name)) <= 0.5
+        fit = identify(run, use_tip=False).fits[1]
+        assert abs(getattr(fit.model, name) - getattr(case.truth, name)) <= 0.5
+        return
+    assert name in reading.doubts
     assert "times the other side's dead zone" in reading.doubts[name]
-    # the refusal gives that reason
     with pytest.raises(IdentificationError, match=f"the current's {name} is not an edge .*a curve, not the edge"):
         identify(run, use_tip=False)
 
@@ -1422,3 +1430,17 @@ def test_a_wave_of_fewer_than_three_periods_on_the_knobs_dead_zone_is_no_cogging
     km = KnobModel(d_pos=tr.d_pos, d_neg=tr.d_neg, b_pos=tr.b_pos, b_neg=tr.b_neg, omega=tr.omega,
                    h_pos=tr.h_pos, h_neg=tr.h_neg)
     assert current_levels(run, 1, km).ripple is None
+
+
+def test_a_take_up_split_off_by_a_short_corner_piece_is_still_read():
+    # independent plant (zoo seed 5000211, examined at stop 44, design data since): a one-cycle
+    # tip-load sweep whose only pass up through d_pos = 15.01 deg is its first stretch. The
+    # segmentation split a 0.5-deg corner piece (7 mA/deg) off before the loaded 18 mA/deg, and
+    # the clear take-up out of the flat was dropped: identify refused "never clearly shows the
+    # positive tendon taken up". Read over the corner and the piece after it, the edge is found;
+    # it comes from the first stretch only, so it is an estimate, unclaimed.
+    case, fit = _zoo_current_fit(5000211)
+    assert abs(fit.model.d_pos - case.truth.d_pos) <= 0.1
+    assert "d_pos" not in fit.stderr and "d_pos" in fit.ident.unfixed
+    assert any("only the record's first stretch shows the positive" in w for w in fit.warnings)
+    assert abs(fit.model.d_neg - case.truth.d_neg) <= 3 * fit.stderr["d_neg"] + 0.1

@@ -297,7 +297,8 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
     def take_up(sel: slice | np.ndarray = slice(None)) -> Kink | None:
         # the loading edge of the bins ``sel`` (all of them, or those around a first kink)
         return loading_edge(qb[sel], vb[sel], d, sig, minlen=minlen, resolution=width / 10.0,
-                            min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback)
+                            min_run=int(round(WALL_MIN_RUN / width)), fallback=fallback,
+                            corner=True)
 
     kink = take_up()
     if kink is not None and abs(kink.before) >= DEAD_SHARE * kink.after:
@@ -331,7 +332,7 @@ def read_stretch(q: np.ndarray, c: np.ndarray, t: np.ndarray, start: int, stop: 
         # flips sign up to there, however far a slow turn takes it
         slow_until = float(x[np.argmax(brisk)]) if brisk.any() else 0.0
         plateau, held, span = _plateau(pa, sa, xp, sig, from_reversal,
-                                       _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig)),
+                                       _dead_piece(pa, sa, xp, edge_piece(pa, sa, xp, sig, corner=True)),
                                        slow_until=slow_until,
                                        dead_tilt=abs(kink.before) if kink is not None else 0.0,
                                        ring_until=_ring_until(x, cc, tt, ring_s))
