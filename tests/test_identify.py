@@ -1444,3 +1444,27 @@ def test_a_take_up_split_off_by_a_short_corner_piece_is_still_read():
     assert "d_pos" not in fit.stderr and "d_pos" in fit.ident.unfixed
     assert any("only the record's first stretch shows the positive" in w for w in fit.warnings)
     assert abs(fit.model.d_neg - case.truth.d_neg) <= 3 * fit.stderr["d_neg"] + 0.1
+
+
+def test_walls_that_hold_every_sample_are_no_wall_the_plain_fit_stands():
+    from hystcli.io import parse_run
+    from hystcli.zoo import plants
+
+    # fresh zoo range 5100000, sweep 5100482 (a drop law whose sweep reaches each edge by under
+    # a degree): the walls find_walls reported censored every sample of the tip fit's search, and
+    # the grid kernel divided by zero (a traceback out of identify). Such walls are no wall: the
+    # plain fit stands, and it says the sweep does not pass the edges.
+    case = plants.sweep_case(5100482)
+    with pytest.raises(IdentificationError, match="cannot fix d_pos"):
+        identify(parse_run(case.record.csv_text(), source="zoo"))
+
+
+def test_fit_tip_refuses_walls_that_leave_no_free_loop():
+    from hystcli.errors import ModelError
+    from hystcli.identify.tip import fit_tip
+
+    q = np.concatenate([np.linspace(0, 30, 200), np.linspace(30, -30, 400), np.linspace(-30, 0, 200)])
+    y = np.clip(q, -10, 10)
+    # a bottom wall above every sample: each one is "held", none is free
+    with pytest.raises(ModelError, match="free samples"):
+        fit_tip(q, y, walls=(20.0, None))

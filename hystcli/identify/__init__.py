@@ -298,8 +298,11 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         # sweep's quarter second spans many degrees of knob and averages a wall's residuals
         # away, so there the samples' own spread must halve as well (WALL_NOISE_DROP)
         walls = find_walls(q, y, fit.noise)
-        if walls != (None, None):
-            wfit = fit_tip(q, y, starts, keep=chk.reversals, walls=walls)
+        try:
+            wfit = fit_tip(q, y, starts, keep=chk.reversals, walls=walls) if walls != (None, None) else None
+        except ModelError:
+            wfit = None          # walls holding nearly every sample are no wall: the plain fit stands
+        if wfit is not None:
             free = tip_predict(wfit.theta, q)
             wmis = systematic_misfit(at_walls(free, walls, y) - y, fs)
             # the free loop must go beyond each wall where the tip sits at it

@@ -123,6 +123,11 @@ def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
         out[i] = z
 
 
+MIN_FREE_SAMPLES = 20
+"""Fewest samples clear of the walls (of the search's decimation and of the fit's) for
+:func:`fit_tip` to fit a free loop under censoring."""
+
+
 @njit(cache=True)
 def _batch_kernel(q, y, wt, side, lvl, cands, out):
     # SSE after the best (h_mid, omega >= 1e-3) of every candidate geometry, best of three
@@ -560,6 +565,13 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
 
     cs, cf = censor_of(ys, walls), censor_of(yf, walls)
     free_s = None if cs is None else ~(cs[0] | cs[2])
+    if cs is not None:
+        # walls that hold (nearly) every sample leave no free loop to fit: the least squares
+        # of (h_mid, omega) over no samples is undefined (fresh zoo range 5100000 reached it)
+        n_free = min(int(free_s.sum()), int((~(cf[0] | cf[2])).sum()))
+        if n_free < MIN_FREE_SAMPLES:
+            raise ModelError(f"the walls found leave {n_free} free samples, fewer than "
+                             f"{MIN_FREE_SAMPLES}: no free loop to fit")
 
     cands = _candidates(q_min, q_max)
     sse = np.empty(cands.shape[0])
