@@ -1461,10 +1461,11 @@ def test_walls_that_hold_every_sample_are_no_wall_the_plain_fit_stands():
 
 def test_fit_tip_refuses_walls_that_leave_no_free_loop():
     from hystcli.errors import ModelError
-    from hystcli.identify.tip import fit_tip
+    from hystcli.identify.tip import NoFreeLoop, fit_tip
 
     q = np.concatenate([np.linspace(0, 30, 200), np.linspace(30, -30, 400), np.linspace(-30, 0, 200)])
     y = np.clip(q, -10, 10)
     # a bottom wall above every sample: each one is "held", none is free
-    with pytest.raises(ModelError, match="free samples"):
+    with pytest.raises(NoFreeLoop, match="free samples") as err:
         fit_tip(q, y, walls=(20.0, None))
+    assert isinstance(err.value, ModelError)      # a HystError still, should it reach the CLI

@@ -34,7 +34,7 @@ from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
 from .current import UNLOAD_LEVEL, CurrentReading, conditioned_current, read_current, ringing_time
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
-from .tip import TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
+from .tip import NoFreeLoop, TipFit, at_walls, bootstrap_tip, find_walls, fit_tip, refit_with_edge, wall_levels, z_path
 from .tip import predict as tip_predict
 
 __all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "current_levels", "find_reversals",
@@ -300,7 +300,7 @@ def _identify_knob(run: Run, k: int, omega: float | None, use_tip: bool, bootstr
         walls = find_walls(q, y, fit.noise)
         try:
             wfit = fit_tip(q, y, starts, keep=chk.reversals, walls=walls) if walls != (None, None) else None
-        except ModelError:
+        except NoFreeLoop:
             wfit = None          # walls holding nearly every sample are no wall: the plain fit stands
         if wfit is not None:
             free = tip_predict(wfit.theta, q)

@@ -128,6 +128,11 @@ MIN_FREE_SAMPLES = 20
 :func:`fit_tip` to fit a free loop under censoring."""
 
 
+class NoFreeLoop(ModelError):
+    """:func:`fit_tip` was given walls that leave fewer than :data:`MIN_FREE_SAMPLES` samples free:
+    no free loop to fit (the caller keeps its plain fit)."""
+
+
 @njit(cache=True)
 def _batch_kernel(q, y, wt, side, lvl, cands, out):
     # SSE after the best (h_mid, omega >= 1e-3) of every candidate geometry, best of three
@@ -570,7 +575,7 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
         # of (h_mid, omega) over no samples is undefined (fresh zoo range 5100000 reached it)
         n_free = min(int(free_s.sum()), int((~(cf[0] | cf[2])).sum()))
         if n_free < MIN_FREE_SAMPLES:
-            raise ModelError(f"the walls found leave {n_free} free samples, fewer than "
+            raise NoFreeLoop(f"the walls found leave {n_free} free samples, fewer than "
                              f"{MIN_FREE_SAMPLES}: no free loop to fit")
 
     cands = _candidates(q_min, q_max)
