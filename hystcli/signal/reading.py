@@ -124,6 +124,9 @@ class CurrentReading:
         Slope of the current in the dead zone, load coordinates (current unit per deg).
     loaded_slope : dict of str to float
         Slope just past each loading edge, load coordinates (current unit per deg).
+    edge_level : dict of str to float
+        The current where each tendon is taken up (current unit), moving toward it: a bend moves
+        the take-up along the knob, not this level.
     noise : float
         Per-sample noise of the conditioned current about the broken lines.
     ripple : Ripple or None
@@ -139,6 +142,7 @@ class CurrentReading:
     no_load: dict[int, float]
     dead_slope: float
     loaded_slope: dict[str, float]
+    edge_level: dict[str, float]
     noise: float
     ripple: Ripple | None = None
     stretches: tuple[StretchReading, ...] = field(default=(), repr=False)
@@ -489,6 +493,7 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     notes: dict[str, str] = {}
     no_load: dict[int, float] = {}
     loaded_slope: dict[str, float] = {}
+    edge_level: dict[str, float] = {}
     dead_slopes = []
     for side, d in (("pos", 1), ("neg", -1)):
         seen = _confirmed([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
@@ -514,6 +519,8 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
                                       f"p = {p:.2g}): the interval carries their spread")
             slopes = [float(orientation(sign, d) * s.fit.slopes[s.edge + 1]) for s in mine]
             loaded_slope[side] = float(np.median(slopes))
+            edge_level[side] = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted())
+                                                for s in mine]))
         deads = [s for s in stretches if s.direction == d and s.dead is not None]
         levels = []
         for s in deads:
@@ -545,7 +552,8 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     noise = _noise(q, c, stretches)
     return CurrentReading(sign=sign, sign_note=sign_note, edges=edges, backlash=backlash, notes=notes,
                           no_load=no_load, dead_slope=float(np.median(dead_slopes)) if dead_slopes else 0.0,
-                          loaded_slope=loaded_slope, noise=noise, ripple=ripple, stretches=tuple(stretches))
+                          loaded_slope=loaded_slope, edge_level=edge_level, noise=noise, ripple=ripple,
+                          stretches=tuple(stretches))
 
 
 def _dead_span(s: StretchReading) -> tuple[float, float]:
