@@ -26,7 +26,7 @@ from .tip import PARAMS, LoopFit, TipFit, _clip_residuals, _params, _params_jaco
 
 __all__ = ["tip_intervals"]
 
-PROFILE_SAMPLES = 2000
+PROFILE_SAMPLES = 1000
 """Most samples a profile refit evaluates (a computation budget; reversals kept)."""
 
 BISECTIONS = 4
@@ -150,7 +150,7 @@ def _walk(best: LoopFit, q, y, f_scale, noise, tau, chi2, j, v0, sign, step0, li
     def rise(v: float):  # noqa: ANN202
         nonlocal start
         got = refine_clipped(start, q, y, best.sides, f_scale, noise, penalty=_penalty(j, v, weight),
-                             max_nfev=150)
+                             max_nfev=40)
         r = _clip_residuals(got.p, q, y, got.sides)
         dev = float(np.sum(2.0 * (np.sqrt(1.0 + (r / f_scale) ** 2) - 1.0))) * f_scale ** 2 / noise ** 2
         start = got.p
@@ -166,6 +166,8 @@ def _walk(best: LoopFit, q, y, f_scale, noise, tau, chi2, j, v0, sign, step0, li
         d, got = rise(v)
         if d < -0.5 and restart:
             return None, got           # a better optimum than the fit: restart from it
+        if first and abs(d - chi2) < 0.2 * chi2 and not hit:
+            return v, None
         if first and 0.25 * chi2 < d < 4.0 * chi2 and not hit:
             # near-quadratic: try where the parabola through the fit and this point crosses
             guess = v0 + sign * step * math.sqrt(chi2 / d)

@@ -588,10 +588,18 @@ def _wall_starts(qs: np.ndarray, ys: np.ndarray, sides: tuple[bool, bool], noise
     lvl = np.where(at_hi, hi0, np.where(at_lo, lo0, 0.0))
     levels = ([lo0] if sides[0] else []) + ([hi0] if sides[1] else [])
     out = []
-    for g in _search(qs, ys, N_STARTS, span, free.astype(float), side, lvl):
+    for g in _search(qs, ys, 2, span, free.astype(float), side, lvl):
         th = _start_from_geometry(g, qs, ys, free)
         out.append(np.concatenate([th, levels]))
     return out
+
+
+def _fit_walls(best: LoopFit, qs, ys, qf, yf, sides, f_scale, noise, span) -> LoopFit:  # noqa: ANN001
+    """The loop clipped by walls on ``sides``, from the plain fit and from a censored search."""
+    levels = ([float(np.min(yf))] if sides[0] else []) + ([float(np.max(yf))] if sides[1] else [])
+    cands = [np.concatenate([best.p[:8], levels])] + _wall_starts(qs, ys, sides, noise, span)
+    fits = [refine_clipped(p, qs, ys, sides, f_scale, noise) for p in cands]
+    return refine_clipped(min(fits, key=lambda f: f.deviance).p, qf, yf, sides, f_scale, noise)
 
 
 def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
@@ -640,13 +648,15 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     chosen = best
     chosen_bic = _bic(best.deviance, tau, qf.size, 8)
     if walls:
+        # a wall on one side, then (when both single walls beat the plain loop) on both
+        improved = []
         for sides in ((False, True), (True, False), (True, True)):
-            nw = int(sides[0]) + int(sides[1])
-            levels = ([float(np.min(yf))] if sides[0] else []) + ([float(np.max(yf))] if sides[1] else [])
-            cands = [np.concatenate([best.p[:8], levels])] + _wall_starts(qs, ys, sides, noise, span)
-            fits = [refine_clipped(p, qs, ys, sides, f_scale, noise) for p in cands]
-            got = refine_clipped(min(fits, key=lambda f: f.deviance).p, qf, yf, sides, f_scale, noise)
-            b = _bic(got.deviance, tau, qf.size, 8 + nw)
+            if sides == (True, True) and len(improved) < 2:
+                break
+            got = _fit_walls(best, qs, ys, qf, yf, sides, f_scale, noise, span)
+            b = _bic(got.deviance, tau, qf.size, 8 + int(sides[0]) + int(sides[1]))
+            if b < _bic(best.deviance, tau, qf.size, 8):
+                improved.append(sides)
             if b < chosen_bic:
                 chosen, chosen_bic = got, b
     model = model_of(chosen.theta)

@@ -30,6 +30,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from . import pwl_kernels as _k
+
 __all__ = ["Piecewise", "fit_piecewise", "knot_interval", "autocorrelation_time", "robust_scale"]
 
 IRLS_ROUNDS = 4
@@ -157,31 +159,14 @@ def _design(x: np.ndarray, x0: float, knots: np.ndarray, z: np.ndarray) -> np.nd
     return np.hstack([a, z]) if z.shape[1] else a
 
 
-def _wls(a: np.ndarray, y: np.ndarray, w: np.ndarray) -> np.ndarray:
-    sw = np.sqrt(w)
-    coef, *_ = np.linalg.lstsq(a * sw[:, None], y * sw, rcond=None)
-    return coef
+def _z(z: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(z, dtype=np.float64).reshape(z.shape[0], -1)
 
 
 def _solve(x, y, sw, z, x0, knots, scale, u=None):  # noqa: ANN001
     """IRLS at fixed knots: (coef, irls weights, deviance)."""
-    a = _design(x, x0, knots, z)
-    base = sw ** 2
-    u = np.ones_like(x) if u is None else u
-    for _ in range(IRLS_ROUNDS):
-        coef = _wls(a, y, base * u)
-        r = (a @ coef - y) * sw
-        u = _irls_weight(r, scale)
-    coef = _wls(a, y, base * u)
-    r = (a @ coef - y) * sw
-    return coef, _irls_weight(r, scale), float(np.sum(_rho((r / scale) ** 2)))
-
-
-def _suffix(a: np.ndarray) -> np.ndarray:
-    """Sums from each index to the end, with a zero row appended (index n: nothing left)."""
-    out = np.zeros((a.shape[0] + 1,) + a.shape[1:])
-    out[:-1] = np.cumsum(a[::-1], axis=0)[::-1]
-    return out
+    u = np.ones_like(x) if u is None else np.array(u, dtype=np.float64)
+    return _k.solve(x, y, sw, _z(z), float(x0), np.asarray(knots, np.float64), float(scale), u, IRLS_ROUNDS)
 
 
 def _scan(x, y, w, z, x0, knots, j, cand):  # noqa: ANN001
@@ -190,57 +175,14 @@ def _scan(x, y, w, z, x0, knots, j, cand):  # noqa: ANN001
     The hinge column ``(x - p)_+`` of a candidate ``p`` is projected off the other columns through
     suffix sums over the sorted ``x``: every candidate costs a few sums, not a pass over the data.
     """
-    others = np.delete(knots, j)
-    base = _design(x, x0, others, z)
-    sw = np.sqrt(w)
-    q, rr = np.linalg.qr(base * sw[:, None])
-    diag = np.abs(np.diag(rr))
-    q = q[:, diag > 1e-10 * max(float(diag.max()), 1e-300)]
-    yw = y * sw
-    r0 = yw - q @ (q.T @ yw)
-    xc = x - x0
-    pc = np.asarray(cand, float) - x0
-    k = np.searchsorted(x, cand, side="right")
-    sq_x = _suffix(q * (sw * xc)[:, None])[k]
-    sq_1 = _suffix(q * sw[:, None])[k]
-    qh = sq_x - pc[:, None] * sq_1
-    s_xx, s_x, s_1 = _suffix(w * xc * xc)[k], _suffix(w * xc)[k], _suffix(w)[k]
-    hh = s_xx - 2.0 * pc * s_x + pc * pc * s_1 - np.einsum("ij,ij->i", qh, qh)
-    hr = _suffix(sw * xc * r0)[k] - pc * _suffix(sw * r0)[k]
-    tiny = 1e-12 * max(float(np.max(s_xx)) if s_xx.size else 0.0, 1e-300)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        gain = np.where(hh > tiny, hr * hr / hh, 0.0)
-    return float(r0 @ r0) - gain
+    return _k.scan(x, y, np.asarray(w, np.float64), _z(z), float(x0), np.asarray(knots, np.float64), int(j),
+                   np.ascontiguousarray(cand, dtype=np.float64))
 
 
 def _place(x, y, sw, z, x0, knots, scale, grid):  # noqa: ANN001
     """Coordinate descent of the knots over ``grid`` with robust reweighting: (coef, knots, u, dev)."""
-    knots = np.sort(np.asarray(knots, float))
-    coef, u, dev = _solve(x, y, sw, z, x0, knots, scale)
-    for _ in range(6):
-        moved = False
-        w = sw ** 2 * u
-        for j in range(knots.size):
-            rss = _scan(x, y, w, z, x0, knots, j, grid)
-            best = float(grid[int(np.argmin(rss))])
-            if best != knots[j]:
-                knots[j] = best
-                moved = True
-        knots = np.sort(knots)
-        coef, u, dev_new = _solve(x, y, sw, z, x0, knots, scale, u)
-        if not moved or dev_new >= dev - 1e-9 * max(dev, 1.0):
-            dev = min(dev, dev_new)
-            break
-        dev = dev_new
-    # below the grid: each knot on a fine scan between its grid neighbours
-    w = sw ** 2 * u
-    for j in range(knots.size):
-        i = int(np.clip(np.searchsorted(grid, knots[j]), 1, grid.size - 1))
-        fine = np.linspace(grid[max(i - 1, 0)], grid[min(i + 1, grid.size - 1)], 21)
-        knots[j] = float(fine[int(np.argmin(_scan(x, y, w, z, x0, knots, j, fine)))])
-    knots = np.sort(knots)
-    coef, u, dev = _solve(x, y, sw, z, x0, knots, scale, u)
-    return coef, knots, u, dev
+    return _k.place(x, y, sw, _z(z), float(x0), np.asarray(knots, np.float64), float(scale),
+                    np.ascontiguousarray(grid, dtype=np.float64), IRLS_ROUNDS)
 
 
 def _candidates(y: np.ndarray, k: int, min_size: int) -> list[np.ndarray]:
@@ -294,10 +236,10 @@ def fit_piecewise(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, *, 
     -------
     Piecewise
     """
-    x = np.asarray(x, float)
-    y = np.asarray(y, float)
-    sw = np.sqrt(np.ones_like(x) if w is None else np.maximum(np.asarray(w, float), 0.0))
-    z = np.zeros((x.size, 0)) if z is None else np.asarray(z, float).reshape(x.size, -1)
+    x = np.ascontiguousarray(x, dtype=np.float64)
+    y = np.ascontiguousarray(y, dtype=np.float64)
+    sw = np.sqrt(np.ones_like(x) if w is None else np.maximum(np.asarray(w, np.float64), 0.0))
+    z = np.zeros((x.size, 0)) if z is None else _z(np.asarray(z, np.float64).reshape(x.size, -1))
     x0 = float(x[0])
     n = x.size
     inner = x[min_size:-min_size] if n > 2 * min_size + 1 else x

@@ -245,6 +245,7 @@ def _z(level: float) -> float:
 def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int | None, int | None, int | None]:
     """(dead piece, edge knot, hold knot) of one stretch, read in load coordinates.
 
+    Returns ``(dead, edge, hold)`` (the edge is the knot ending the dead piece; None where absent).
     The dead zone is the last piece that every later piece climbs faster than (by ``z`` standard
     errors of the difference, against the piece's own slope either way) and where the slope
     bottoms out (the piece before it, if any, is steeper either way): past the take-up the tendon
@@ -273,15 +274,13 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
         return later and bottom
 
     cands = [m for m in range(k) if dead_zone_like(m)]
-    if not cands:
-        return None, None, None
-    dead = cands[-1]
-    hold = None
-    for h in range(dead):
-        flat = abs(slopes[h] - slopes[dead]) <= z * math.hypot(se[h], se[dead])
-        if flat and steeper(h + 1, h):
-            hold = h  # knot h ends piece h
-            break
+    dead = cands[-1] if cands else None
+    # the held plateau: a piece before the dead zone that a significant rise (the unloading) ends,
+    # and whose slope lies nearer the dead zone's (or level, in a stretch that ends before its
+    # take-up) than the unloading's: a held load, not a bend in the unloading
+    flat = 0.0 if dead is None else slopes[dead]
+    hold = next((h for h in range(dead if dead is not None else k)
+                 if steeper(h + 1, h) and abs(slopes[h] - flat) < slopes[h + 1] - slopes[h]), None)
     return dead, dead, hold
 
 
@@ -449,8 +448,17 @@ def _fit_stretches(q, c, t, spans, settings, band, ring_s) -> list[Piecewise]:  
     scale = float(np.average([f.scale for f in first], weights=size))
     tau = float(np.average([f.tau for f in first], weights=size))
     peak = max(float(np.max(v)) if v.size else 0.0 for _, _, _, v in pts)
-    best = None
+    # the transition speed is chosen on the longest stretch (one motor: one speed), then every
+    # stretch is read with and without the nuisance at it, by the total BIC
+    longest = max(range(len(pts)), key=lambda i: pts[i][0].size)
+    x, y, w, sp = pts[longest]
+    v_best, b_best = None, math.inf
     for v in (None,) + tuple(f * peak for f in FRICTION_SPEEDS):
+        b = fit_piecewise(x, y, w, z=_friction(sp, v), max_pieces=settings.max_pieces, scale=scale, tau=tau).bic
+        if b < b_best:
+            v_best, b_best = v, b
+    best = None
+    for v in {None, v_best}:
         fits = [fit_piecewise(x, y, w, z=_friction(sp, v), max_pieces=settings.max_pieces, scale=scale, tau=tau)
                 for x, y, w, sp in pts]
         total = sum(f.bic for f in fits) + (0.0 if v is None else math.log(max(sum(f.n_eff for f in fits), 2.0)))
