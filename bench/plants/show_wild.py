@@ -4,11 +4,16 @@ Usage: python bench/plants/show_wild.py [N] [FIRST_SEED]   (defaults 40 and 0)
 
 Each line: seed, family, the tip's true edges, the current's true edges (departure from no-load),
 current sign, sampling rate, samples, which tip edges the sweep passes, the state it starts from.
+A last line gives the median time sweep_case took per case (after one warm-up call, which loads
+the compiled kernels) and the machine's load average.
 """
 
 from __future__ import annotations
 
+import os
+import statistics
 import sys
+import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
@@ -29,8 +34,16 @@ def line(case: wild.SweepCase) -> str:
 def main(argv: list[str]) -> None:
     n = int(argv[0]) if argv else 40
     first = int(argv[1]) if len(argv) > 1 else 0
+    wild.sweep_case(first)
+    times = []
     for seed in range(first, first + n):
-        print(line(wild.sweep_case(seed)))
+        start = time.perf_counter()
+        case = wild.sweep_case(seed)
+        times.append(time.perf_counter() - start)
+        print(line(case))
+    load = ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    print(f"median sweep_case time {1e3 * statistics.median(times):.1f} ms over {n} cases "
+          f"(load average {load})")
 
 
 if __name__ == "__main__":

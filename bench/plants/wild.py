@@ -663,7 +663,7 @@ def _draw_instrument(dr: _Draws, on: dict, sweep: _Sweep, drive: _Drive) -> _Ins
         if dr.choice("coloured_kind", ("ar1", "pink")) == "ar1":
             taus = (tau,)
         else:  # equal variance per AR(1) with log-spaced times: about 1/f between them
-            taus = tuple(float(x) for x in np.geomspace(tau, min(30 * tau, 5.0), 4))
+            taus = tuple(float(x) for x in np.geomspace(tau, min(30 * tau, 0.5), 4))
         sigma_y_col = dr.uniform("sigma_tip_coloured_ratio", 0.5, 2.0) * sigma_y
     f["coloured_taus"] = ",".join(f"{t:.4g}" for t in taus)
     drift_c = drift_y = 0.0
@@ -1077,11 +1077,8 @@ class LivePlant:
         rest = float(rng.uniform(lo, hi)) if lo < hi else float(rng.uniform(truth.d_neg,
                                                                              truth.d_pos))
         st = _rest_state(plant, rest, float(rng.uniform(truth.h_pos, truth.h_neg)))
-        side = int(rng.integers(3))  # none, beyond d_pos, beyond d_neg
-        past = float(rng.uniform(0.5, 25.0))
-        path = [rest] + ([truth.d_pos + past] if side == 1 else []) + (
-            [truth.d_neg - past] if side == 2 else []) + [0.0, -offset]
-        _walk(plant, st, path)
+        excursion = float(rng.uniform(truth.d_neg - 25.0, truth.d_pos + 25.0))
+        _walk(plant, st, [rest, excursion, 0.0, -offset])
         st[K.S_Q], st[K.S_T] = 0.0, 0.0
         keep = 1.0 + plant.inst.lat_c + plant.inst.lat_y + plant.inst.servo_time
         self._eng = _Engine(plant, st, offset, rng, noiseless, t_ref=LIVE_T_REF, keep=keep)
