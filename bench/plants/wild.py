@@ -36,7 +36,16 @@ decaying stiction bursts at reversals, isolated outliers, drift of the no-load l
 exponential), quantisation and an offline zero-phase 3rd-order Butterworth 20 Hz low-pass; the tip
 carries tracker noise, drift, quantisation and the same filter. Sampling 30 Hz - 5 kHz, sometimes
 jittered, at most 50 000 samples. The plant is integrated on a grid at least as fine as 0.05 deg of
-knob travel and read at the sample instants.
+knob travel and read at the sample instants. Outside `weak-current` the current's noise puts the
+larger loaded rise 3-300 sigma above no-load (the smaller side as the asymmetry leaves it).
+
+*Runs.* A sweep is a sine, a triangle or a decaying sine (its envelope ends at the drawn extent),
+0.5-4 cycles (at least 1.25 when it covers both edges) at a peak speed of 2-150 deg/s (at
+most 1 Hz). In about 90 % of cases it goes past
+both tip edges by reach + a margin of 0.5-40 deg, where reach = (h_neg - h_pos)/omega is the
+travel past an edge the tip needs before it comes back to the other flat; the others cover one
+edge or none. It starts at any phase or back at its rest point, after a rest in the dead zone
+and maybe an excursion past an edge (so a tendon may be taut and the tip held).
 
 Families (each breaks one premise of an earlier plant set; every case also mixes in each other
 break with probability `MIX`)
@@ -52,6 +61,21 @@ asymmetric     edge distances d_pos/(-d_neg), backlash and current gains 3:1 to 
 weak-current   the noise is set so that a loaded end rises only 1.5-3 sigma (one or both sides).
 magnitude      the drive reports |c - c0|.
 wall           the tip meets a rigid wall on one side within the sweep (truth: the free tip).
+
+Factors
+-------
+`factors` holds every drawn value under its name, and these derived truths: `breaks` (the family
+and the mixed-in breaks), `current_sign`, `current_edge_pos/neg` (knob angle, straight shaft,
+where each tendon's current departs from no-load when taken up from slack), `current_knee_pos/neg`
+(where the loaded line's extension meets no-load: the edge moved by the take-up's rounding),
+`current_shows_backlash` (the load holds over the tip's plateau before it unloads), `no_load`,
+`gain_pos/neg` (mA per deg of stretch), `rise_pos/neg` and `rise_sigma_pos/neg` (the clean loaded
+rise at the sweep's extreme, in mA and in current-noise sigmas), `wall_side/knob/tip`,
+`passes_pos/neg_edge` (the tip, having rested on its dead-zone flat, goes on along the loading
+branch at least `PASS_MIN` past that edge: the record can fix it), `start_state` (the tendon that
+carries load when the record starts, else the side the tip is held on, else 'slack'),
+`tip_before` (the tip before the first sample), `fs`, `n`. A replay adds `offset` and the same
+run factors prefixed `replay_`, with `replay_current_edge_pos/neg` on the bent shaft.
 
 `noiseless=True` records an ideal instrument on the same plant: the plant evaluated at the logged
 instants, no servo lag or logging delay, no noise, drift, cogging, stiction bursts, outliers,
@@ -573,8 +597,7 @@ def _draw_sweep(dr: _Draws, on: dict, truth: KnobTruth, drive: _Drive) -> _Sweep
     fs = min(max(fs, 300.0 / duration), (MAX_N - 1) / duration)
     # History: rest with both tendons slack, then maybe an excursion past an edge, then the
     # sweep's first point: anywhere on the path, or back at the rest point in the dead zone.
-    lo, hi = max(d_neg, drive.edge_neg), min(d_pos, drive.edge_pos)
-    rest = dr.uniform("rest_knob", lo, hi) if lo < hi else dr.uniform("rest_knob", d_neg, d_pos)
+    rest = dr.uniform("rest_knob", *_slack_interval(truth, drive))
     tip_rest = dr.uniform("rest_tip", truth.h_pos, truth.h_neg)
     centre = 0.5 * (q_max + q_min)
     phase = dr.uniform("phase_drawn", 0.0, 2 * math.pi)
@@ -601,6 +624,13 @@ def _draw_sweep(dr: _Draws, on: dict, truth: KnobTruth, drive: _Drive) -> _Sweep
         excursion = min(q_start, d_neg) - past
     return _Sweep(wave=wave, duration=duration, fs=fs, v_peak=v_peak, rest=rest,
                   tip_rest=tip_rest, excursion=excursion)
+
+
+def _slack_interval(truth: KnobTruth, drive: _Drive) -> tuple[float, float]:
+    """Knob angles where the tip can rest on a flat with both tendons slack (the tip's dead zone
+    where the current edges leave none of it)."""
+    lo, hi = max(truth.d_neg, drive.edge_neg), min(truth.d_pos, drive.edge_pos)
+    return (lo, hi) if lo < hi else (truth.d_neg, truth.d_pos)
 
 
 def _draw_wall(dr: _Draws, on: dict, truth: KnobTruth, drive: _Drive) -> _Drive:
@@ -742,7 +772,8 @@ def _knee(w: float, shape: str) -> float:
 
 
 def _params(truth: KnobTruth, drive: _Drive, inst: _Instrument, offset: float,
-            noiseless: bool, static: bool = False) -> np.ndarray:
+            ideal: bool) -> np.ndarray:
+    """Kernel parameters; `ideal` leaves out the servo lag and the stiction bursts."""
     prm = np.zeros(K.N_PRM)
     prm[K.P_OFFSET] = offset
     prm[K.P_D_POS], prm[K.P_D_NEG] = truth.d_pos, truth.d_neg
@@ -751,22 +782,25 @@ def _params(truth: KnobTruth, drive: _Drive, inst: _Instrument, offset: float,
     prm[K.P_WALL_SIDE], prm[K.P_WALL_Y] = drive.wall_side, drive.wall_tip
     prm[K.P_BETA_POS], prm[K.P_BETA_NEG] = drive.beta_pos, drive.beta_neg
     prm[K.P_EPS_DIR] = drive.eps_dir
-    if not (noiseless or static):
+    if not ideal:
         prm[K.P_SERVO_TAU] = inst.servo_time if inst.servo == "lag" else 0.0
         prm[K.P_STICTION_AMP] = inst.stiction_amp
         prm[K.P_STICTION_TAU] = inst.stiction_tau
     return prm
 
 
-def _walk(plant: _Plant, st: np.ndarray, path, offset: float = 0.0) -> None:
-    """Move the plant quasi-statically through the knob angles `path` (rate-independent)."""
+def _walk(plant: _Plant, st: np.ndarray, path) -> None:
+    """Move the straight-shaft plant quasi-statically through the knob angles `path`.
+
+    The state's recursions are rate-independent, so the path's corners are all it needs.
+    """
     path = np.asarray(path, dtype=float)
     zeros = np.zeros_like(path)
-    K.advance(zeros + st[K.S_T], path, zeros,
-              st, _params(plant.truth, plant.drive, plant.inst, offset, True, static=True))
+    K.advance(zeros + st[K.S_T], path, zeros, st,
+              _params(plant.truth, plant.drive, plant.inst, 0.0, ideal=True))
 
 
-def _rest_state(plant: _Plant, rest: float, tip: float) -> np.ndarray:
+def _rest_state(rest: float, tip: float) -> np.ndarray:
     st = np.zeros(K.N_STATE)
     st[K.S_Q] = st[K.S_ZP] = st[K.S_ZN] = rest
     st[K.S_Y] = tip
@@ -774,12 +808,16 @@ def _rest_state(plant: _Plant, rest: float, tip: float) -> np.ndarray:
 
 
 def _start_state(plant: _Plant, st: np.ndarray) -> str:
-    """'pos-taut' / 'neg-taut' when a tendon carries load or the tip is held off its flats."""
+    """The tendon that carries load, else the side the tip is held on, else 'slack'."""
     tp, tn = plant.drive.tendon_loads(st[K.S_ZP], st[K.S_ZN])
     y = st[K.S_Y]
-    if y > plant.truth.h_neg + _TOL or (tp > 0 and y >= plant.truth.h_pos - _TOL):
+    if tp > 0:
         return "pos-taut"
-    if y < plant.truth.h_pos - _TOL or tn > 0:
+    if tn > 0:
+        return "neg-taut"
+    if y > plant.truth.h_neg + _TOL:
+        return "pos-taut"
+    if y < plant.truth.h_pos - _TOL:
         return "neg-taut"
     return "slack"
 
@@ -860,7 +898,6 @@ class _Engine:
 
     def __init__(self, plant: _Plant, st: np.ndarray, offset: float, rng: np.random.Generator,
                  noiseless: bool, t_ref: float, keep: float | None = None):
-        self.plant = plant
         self.inst = plant.inst
         self.drive = plant.drive
         self.offset = offset
@@ -868,7 +905,7 @@ class _Engine:
         self.noiseless = noiseless
         self.t_ref = t_ref
         self.rng = rng
-        self.prm = _params(plant.truth, plant.drive, plant.inst, offset, noiseless)
+        self.prm = _params(plant.truth, plant.drive, plant.inst, offset, ideal=noiseless)
         self.cmd = _Trace(keep)
         self.out = _Trace(keep)
         if not noiseless:
@@ -878,8 +915,8 @@ class _Engine:
             self.noise_y = _Noise(rng, math.hypot(self.inst.sigma_y, self.inst.sigma_y_col),
                                   col_frac_y, self.inst.col_taus)
 
-    def run(self, t: np.ndarray, q_cmd: np.ndarray, v_cmd: np.ndarray) -> np.ndarray:
-        """Integrate the plant over commanded points; returns the kernel's output rows."""
+    def run(self, t: np.ndarray, q_cmd: np.ndarray, v_cmd: np.ndarray) -> None:
+        """Integrate the plant over commanded points and keep what the instrument reads."""
         if not self.noiseless and self.inst.servo == "delay":
             self.cmd.append(t, q=q_cmd, v=v_cmd)
             q_cmd = self.cmd.at("q", t - self.inst.servo_time)
@@ -892,7 +929,6 @@ class _Engine:
             nuisance = nuisance + self.inst.cog_amp * np.sin(
                 2 * math.pi * q_act / self.inst.cog_period + self.inst.cog_phase)
         self.out.append(t, dev=dev, nuisance=nuisance, y=y)
-        return out
 
     def read(self, t: np.ndarray, offline: bool) -> tuple[np.ndarray, np.ndarray]:
         """Current (mA) and tip (deg) logged at the instants `t`."""
@@ -964,7 +1000,7 @@ def _meta(seed: int, case: str, knob: int) -> dict:
 
 def _straight(plant: _Plant, rngs, noiseless: bool):
     sw = plant.sweep
-    st = _rest_state(plant, sw.rest, sw.tip_rest)
+    st = _rest_state(sw.rest, sw.tip_rest)
     q0 = float(sw.wave.pos(0.0))
     _walk(plant, st, [sw.rest] + ([sw.excursion] if sw.excursion is not None else []) + [q0])
     st[K.S_T] = 0.0
@@ -1071,12 +1107,9 @@ class LivePlant:
         self.knob = knob
         self.knobs = (knob,)
         self.truth = plant.truth.shifted(offset)
-        self._plant = plant
-        truth, drive = plant.truth, plant.drive
-        lo, hi = max(truth.d_neg, drive.edge_neg), min(truth.d_pos, drive.edge_pos)
-        rest = float(rng.uniform(lo, hi)) if lo < hi else float(rng.uniform(truth.d_neg,
-                                                                             truth.d_pos))
-        st = _rest_state(plant, rest, float(rng.uniform(truth.h_pos, truth.h_neg)))
+        truth = plant.truth
+        rest = float(rng.uniform(*_slack_interval(truth, plant.drive)))
+        st = _rest_state(rest, float(rng.uniform(truth.h_pos, truth.h_neg)))
         excursion = float(rng.uniform(truth.d_neg - 25.0, truth.d_pos + 25.0))
         _walk(plant, st, [rest, excursion, 0.0, -offset])
         st[K.S_Q], st[K.S_T] = 0.0, 0.0
