@@ -119,7 +119,7 @@ MAX_N = 50_000
 MAX_STEP_DEG = 0.05
 """Finest knob travel between two points of the integration grid."""
 LIVE_T_REF = 300.0
-"""Time (s) over which a live plant's drift develops."""
+"""Time (s) by which a live plant's drift reaches its drawn amount."""
 _TOL = 1e-9
 
 _STREAM_FAMILY = 0
@@ -867,9 +867,12 @@ class _Noise:
 
 
 def _ramp(t: np.ndarray, inst: _Instrument, t_ref: float) -> np.ndarray:
+    """Drift's shape: 0 at t = 0, 1 at `t_ref` (a record's end), linear (then flat) or
+    exponential."""
     if inst.drift_shape == "linear":
-        return np.clip(t / t_ref, 0.0, 1.0)
-    return 1.0 - np.exp(-t / (inst.drift_tau_frac * t_ref))
+        return np.minimum(t / t_ref, 1.0)
+    tau = inst.drift_tau_frac * t_ref
+    return -np.expm1(-t / tau) / -math.expm1(-t_ref / tau)
 
 
 def _quantise(x: np.ndarray, lsb: float) -> np.ndarray:
@@ -1099,7 +1102,7 @@ class LivePlant:
 
     At construction it has made a random excursion, returned to knob 0 and been bent by
     `offset`; it then rests at knob 0 with one reading taken. Times start at 0 and advance with
-    every sample; drift develops over `LIVE_T_REF` seconds.
+    every sample; drift reaches its drawn amount at `LIVE_T_REF` seconds.
     """
 
     def __init__(self, plant: _Plant, rng: np.random.Generator, offset: float, knob: int,
