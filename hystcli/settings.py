@@ -46,6 +46,11 @@ class Settings:
         *Physical quantity, deg of knob.* Algorithm 1 returns an offset only when its interval at
         :attr:`level` lies within this of it (the paper's 0.5 deg): a less certain offset moves the
         robot by more than it corrects, so the search refuses it.
+    max_fixed_halfwidth : float
+        *Physical quantity, deg.* A parameter counts as fixed by the record when its interval is
+        closed and the tip it predicts moves by less than this across the interval (knob-angle
+        parameters directly; the heights in tip degrees; omega over half the swept range): a
+        record that bounds a parameter only more loosely leaves it not fixed, with its interval.
     max_edge_gap : float
         *Physical quantity, deg of knob.* How far the motor current's take-up may lie from the tip
         model's dead-zone edge and still be read as the same tendon event (a tendon takes up load
@@ -73,6 +78,7 @@ class Settings:
     level: float = 0.95
     false_alarm: float = 1e-3
     max_offset_halfwidth: float = 0.5
+    max_fixed_halfwidth: float = 1.0
     max_edge_gap: float = 2.0
     contact_factor: float = 4.0
     max_pieces: int = 5
@@ -85,7 +91,7 @@ class Settings:
             raise HystError(f"level must be in [0.5, 1), got {self.level}")
         if not 0.0 < self.false_alarm < 0.5:
             raise HystError(f"false_alarm must be in (0, 0.5), got {self.false_alarm}")
-        for name in ("max_offset_halfwidth", "max_edge_gap", "contact_factor"):
+        for name in ("max_offset_halfwidth", "max_fixed_halfwidth", "max_edge_gap", "contact_factor"):
             v = getattr(self, name)
             if not (math.isfinite(v) and v > 0):
                 raise HystError(f"{name} must be a positive number, got {v}")

@@ -22,7 +22,8 @@ from ..estimate import Estimate
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import autocorrelation_time
 from ..signal.stretches import decimation_index
-from .tip import PARAMS, LoopFit, TipFit, _clip_residuals, _params, _params_jacobian, model_of, refine_clipped
+from .tip import (PARAMS, LoopFit, TipFit, _clip_residuals, _params, _params_jacobian, model_of, predict,
+                  refine_clipped)
 
 __all__ = ["tip_intervals"]
 
@@ -91,17 +92,65 @@ def tip_intervals(fit: TipFit, settings: Settings = DEFAULT) -> tuple[dict[str, 
     best = refine_clipped(fit.loop.p, q, y, fit.loop.sides, f_scale, noise)
     tau = autocorrelation_time(_clip_residuals(best.p, q, y, best.sides))
     chi2 = settings.chi2
+    improved = False
     for attempt in range(4):
         # the last attempt takes the intervals as they come, better optima or not
         out, better = _walk_all(best, q, y, f_scale, noise, tau, chi2, settings.level, restart=attempt < 3)
         if better is None:
             break
         best = refine_clipped(better.p, q, y, better.sides, f_scale, noise)
-    if best is not fit.loop and best.deviance < fit.loop.deviance - 1e-9:
-        from dataclasses import replace
+        improved = True
+    if improved:
+        # a better optimum the profile found replaces the fit only where it is better on all the
+        # fit's samples too
+        full = refine_clipped(best.p, fit.q, fit.y, best.sides, f_scale, noise)
+        if full.deviance < fit.loop.deviance - 1e-9:
+            from dataclasses import replace
 
-        fit = replace(fit, loop=best, model=model_of(best.theta))
-    return out, fit
+            fit = replace(fit, loop=full, model=model_of(full.theta))
+    if best.sides == (False, False) and fit.grid:
+        out = _with_distant_optima(out, best, fit.grid, noise, chi2)
+    span = float(np.ptp(fit.q)) or 1.0
+    return {n: _judged(n, e, settings.max_fixed_halfwidth, span) for n, e in out.items()}, fit
+
+
+def _with_distant_optima(out: dict[str, Estimate], best: LoopFit, grid: tuple, noise: float,
+                         chi2: float) -> dict[str, Estimate]:
+    """Each edge's and backlash's interval widened to every geometry of the global search that fits
+    the record within the bound: a profile walked from the best fit sees its own valley only,
+    and a record may hold distant loops that fit it as well (a grid geometry's sum of squares,
+    before any refinement, can only overstate its valley's deviance, so each one within the
+    bound belongs to the set)."""
+    from dataclasses import replace
+
+    cands, sse, qs, ys = grid
+    r = predict(best.theta, qs) - ys
+    tau = autocorrelation_time(r)
+    inside = (sse - float(r @ r)) / max(noise, 1e-12) ** 2 / max(tau, 1.0) <= chi2
+    if not inside.any():
+        return out
+    g = cands[inside]
+    cols = {"d_neg": g[:, 0], "d_pos": g[:, 1], "b_pos": g[:, 2], "b_neg": g[:, 3]}
+    new = dict(out)
+    for name, v in cols.items():
+        e = out[name]
+        new[name] = replace(e, lo=min(e.lo, float(v.min())), hi=max(e.hi, float(v.max())))
+    return new
+
+
+def _judged(name: str, e: Estimate, max_halfwidth: float, span: float) -> Estimate:
+    """The estimate marked fixed only when its interval is closed and the tip it predicts moves by
+    less than ``max_halfwidth`` deg across it (omega over half the swept range)."""
+    from dataclasses import replace
+
+    if not e.fixed:
+        return e
+    scale = 0.5 * span if name == "omega" else 1.0
+    if e.halfwidth * scale <= max_halfwidth:
+        return e
+    unit = "" if name == "omega" else " deg"
+    return replace(e, fixed=False, reason=f"the record bounds it only to [{e.lo:.2f}, {e.hi:.2f}]{unit}: "
+                                          + HINTS[name].split(":")[0])
 
 
 def _walk_all(best: LoopFit, q, y, f_scale, noise, tau, chi2, level, restart=True):  # noqa: ANN001, ANN202

@@ -537,6 +537,9 @@ class TipFit:
         BIC of the chosen loop (walls included) at the effective sample size.
     walls : tuple
         ``(bottom, top)`` tip levels (deg) of the walls the fit clips the loop at (None: none).
+    grid : tuple
+        ``(geometries, sse, qs, ys)``: every geometry the global search scored and its sum of squares
+        on the search's samples ``qs, ys`` (:mod:`.intervals` reads distant optima off it).
     """
 
     model: KnobModel
@@ -549,6 +552,7 @@ class TipFit:
     y: np.ndarray = field(repr=False)
     bic: float = math.nan
     walls: tuple = (None, None)
+    grid: tuple = field(default=(), repr=False)
 
     @property
     def theta(self) -> np.ndarray:
@@ -563,13 +567,20 @@ def _bic(dev: float, tau: float, n: int, k: int) -> float:
     return dev / max(tau, 1.0) + k * math.log(max(n / max(tau, 1.0), 2.0))
 
 
-def _search(qs: np.ndarray, ys: np.ndarray, k: int, span: float, wt: np.ndarray | None = None,
-            side: np.ndarray | None = None, lvl: np.ndarray | None = None) -> list[np.ndarray]:
+def _scored(qs: np.ndarray, ys: np.ndarray, wt: np.ndarray | None = None, side: np.ndarray | None = None,
+            lvl: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Every geometry of the grid and its best sum of squares on ``qs, ys``."""
     cands = _candidates(float(np.min(qs)), float(np.max(qs)))
     sse = np.empty(cands.shape[0])
     zeros = np.zeros(qs.size)
     _batch_kernel(qs, ys, np.ones(qs.size) if wt is None else wt, zeros if side is None else side,
                   zeros if lvl is None else lvl, cands, sse)
+    return cands, sse
+
+
+def _search(qs: np.ndarray, ys: np.ndarray, k: int, span: float, wt: np.ndarray | None = None,
+            side: np.ndarray | None = None, lvl: np.ndarray | None = None) -> list[np.ndarray]:
+    cands, sse = _scored(qs, ys, wt, side, lvl)
     return _distinct_best(cands, sse, k, span)
 
 
@@ -630,7 +641,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     search_idx = decimation_index(qf, SEARCH_SAMPLES)
     qs, ys = np.ascontiguousarray(qf[search_idx]), np.ascontiguousarray(yf[search_idx])
 
-    thetas = [_start_from_geometry(g, qs, ys) for g in _search(qs, ys, N_STARTS, span)]
+    grid_cands, grid_sse = _scored(qs, ys)
+    thetas = [_start_from_geometry(g, qs, ys) for g in _distinct_best(grid_cands, grid_sse, N_STARTS, span)]
     for m in starts:
         zi = (float(y[0]) - 0.5 * (m.h_pos + m.h_neg)) / m.omega
         thetas.append(theta_from_model(m, zi))
@@ -663,7 +675,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     resid = _clip_residuals(chosen.p, qf, yf, chosen.sides)
     rmse = float(np.sqrt(np.mean((chosen.predict(q) - y) ** 2)))
     return TipFit(model=model, loop=chosen, rmse=rmse, noise=float(_robust_sd(resid)), tau=float(tau),
-                  f_scale=float(f_scale), q=qf, y=yf, bic=float(chosen_bic), walls=chosen.walls)
+                  f_scale=float(f_scale), q=qf, y=yf, bic=float(chosen_bic), walls=chosen.walls,
+                  grid=(grid_cands, grid_sse, qs, ys))
 
 
 def systematic_misfit(resid: np.ndarray, fs: float, tau: float, noise: float, level: float) -> tuple[float, bool]:

@@ -257,8 +257,8 @@ class _Search:
         x, c = x[order], c[order]
         if np.ptp(x) <= 0:
             return None, False
-        fit = fit_piecewise(x, c, max_pieces=min(self.settings.max_pieces, 4), min_size=2)
-        noise = max(fit.scale, 1e-9)
+        noise = self._noise()
+        fit = fit_piecewise(x, c, max_pieces=min(self.settings.max_pieces, 4), min_size=2, scale=noise, tau=1.0)
         dead, edge, _ = _classify(fit, self.ref.sign, d, self.z)
         if edge is None:
             o = orientation(self.ref.sign, d)
@@ -270,7 +270,7 @@ class _Search:
         if expected is not None and abs(self._load(level, d) - self._load(expected, d)) > self._band(noise):
             return None, False
         stat = float(profile(fit, edge, np.array([x[-1] + 1.0]))[0])
-        threshold = _threshold(self.settings.false_alarm, x.size, self.max_steps)
+        threshold = _threshold(self.settings.false_alarm, x.size, self.max_steps, self._dof(fit))
         n_after = int(np.sum(x > xe))
         if stat <= threshold or n_after < 2:
             return None, False
@@ -281,6 +281,21 @@ class _Search:
         return _Edge(direction=d, at=d * xe, lo=min(a, b), hi=max(a, b), statistic=stat, threshold=threshold,
                      level=level, slope_before=float(slopes[dead]), slope_after=float(slopes[edge + 1]),
                      n_before=int(x.size - n_after), n_after=n_after, noise=noise), False
+
+    def _noise(self) -> float:
+        """Noise of one reading: from the second differences of every reading so far (a straight
+        or broken line leaves them only noise, but at its few knots), never below a hundredth of
+        the readings' spread."""
+        c = np.array([r[1] for r in self.trace])
+        if c.size < 5:
+            return max(float(np.ptp(c)) if c.size else 1.0, 1e-6)
+        d2 = np.diff(c, 2)
+        s = float(1.4826 * np.median(np.abs(d2 - np.median(d2)))) / math.sqrt(6.0)
+        return max(s, 1e-2 * float(np.ptp(c)), 1e-9)
+
+    def _dof(self, fit) -> int:  # noqa: ANN001
+        """Readings the noise estimate rests on, less what the fit spent (for the F test)."""
+        return max(len(self.trace) - 2, 1)
 
     def _contact(self) -> bool:
         if self.ref.eps_upper is None or len(self.seg_q) < 3:
@@ -354,12 +369,13 @@ class _Search:
         return best
 
 
-def _threshold(false_alarm: float, n: int, max_steps: int) -> float:
-    """The change point's chi-square(1) threshold at ``false_alarm`` spread (Bonferroni) over
-    ``n`` positions of the knot and ``max_steps`` looks."""
-    from scipy.stats import chi2
+def _threshold(false_alarm: float, n: int, max_steps: int, dof: int) -> float:
+    """The change point's threshold at ``false_alarm`` spread (Bonferroni) over ``n`` positions of
+    the knot and ``max_steps`` looks: the F(1, dof) quantile, the noise being estimated from the
+    readings (``dof`` degrees of freedom; the chi-square(1) quantile as ``dof`` grows)."""
+    from scipy.stats import f
 
-    return float(chi2.isf(false_alarm / max(n * max_steps, 1), 1))
+    return float(f.isf(false_alarm / max(n * max_steps, 1), 1, max(dof, 1)))
 
 
 def _offset_halfwidth(edge: _Edge, ref: Reference) -> float:
