@@ -38,6 +38,11 @@ class Settings:
         *Statistical level.* Confidence level of every interval hyst reports: a parameter's
         interval holds the values whose best fit stays within the chi-square(1) quantile at this
         level of the best fit's deviance (profile likelihood). 0.95 gives the usual 3.84.
+    ambiguity_level : float
+        *Statistical level.* A distinct loop (another local optimum of the fit) whose deviance lies
+        within the chi-square(1) quantile at this level of the best's makes every parameter where
+        the two differ not fixed: both predict the record, and a parameter reported as fixed
+        must not hang on which of two near-equal optima the search ended in.
     false_alarm : float
         *Statistical level.* Algorithm 1: the probability that a search along a stretch with no
         edge in it declares one (the change-point test's size, spread over every step and every
@@ -76,6 +81,7 @@ class Settings:
     """
 
     level: float = 0.95
+    ambiguity_level: float = 0.999
     false_alarm: float = 1e-3
     max_offset_halfwidth: float = 0.5
     max_fixed_halfwidth: float = 1.0
@@ -89,6 +95,8 @@ class Settings:
     def __post_init__(self) -> None:
         if not 0.5 <= self.level < 1.0:
             raise HystError(f"level must be in [0.5, 1), got {self.level}")
+        if not self.level <= self.ambiguity_level < 1.0:
+            raise HystError(f"ambiguity_level must be in [level, 1), got {self.ambiguity_level}")
         if not 0.0 < self.false_alarm < 0.5:
             raise HystError(f"false_alarm must be in (0, 0.5), got {self.false_alarm}")
         for name in ("max_offset_halfwidth", "max_fixed_halfwidth", "max_edge_gap", "contact_factor"):
@@ -113,6 +121,13 @@ class Settings:
         from scipy.stats import chi2
 
         return float(chi2.ppf(self.level, 1))
+
+    @property
+    def chi2_ambiguity(self) -> float:
+        """The chi-square(1) quantile at :attr:`ambiguity_level`."""
+        from scipy.stats import chi2
+
+        return float(chi2.ppf(self.ambiguity_level, 1))
 
     def get_params(self) -> dict[str, Any]:
         """The settings as a plain dict (scikit-learn's ``get_params``)."""

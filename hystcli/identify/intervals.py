@@ -109,33 +109,46 @@ def tip_intervals(fit: TipFit, settings: Settings = DEFAULT) -> tuple[dict[str, 
 
             fit = replace(fit, loop=full, model=model_of(full.theta))
     if best.sides == (False, False) and fit.grid:
-        out = _with_distant_optima(out, best, fit.grid, noise, chi2)
+        out = _with_distant_optima(out, best, fit, noise, chi2, settings.chi2_ambiguity)
     span = float(np.ptp(fit.q)) or 1.0
     return {n: _judged(n, e, settings.max_fixed_halfwidth, span) for n, e in out.items()}, fit
 
 
-def _with_distant_optima(out: dict[str, Estimate], best: LoopFit, grid: tuple, noise: float,
-                         chi2: float) -> dict[str, Estimate]:
-    """Each edge's and backlash's interval widened to every geometry of the global search that fits
-    the record within the bound: a profile walked from the best fit sees its own valley only,
-    and a record may hold distant loops that fit it as well (a grid geometry's sum of squares,
-    before any refinement, can only overstate its valley's deviance, so each one within the
-    bound belongs to the set)."""
+def _with_distant_optima(out: dict[str, Estimate], best: LoopFit, fit: TipFit, noise: float, chi2: float,
+                         chi2_ambiguity: float) -> dict[str, Estimate]:
+    """Each interval widened to the distant loops that fit the record about as well.
+
+    A profile walked from the best fit sees its own valley only, and a record may hold distant
+    loops that fit it as well. Two sources, both on the global search's samples: every grid
+    geometry within the level's bound (a grid point's sum of squares, before any refinement, can
+    only overstate its valley's deviance), and every local optimum the fit's starts reached within
+    the ambiguity level's bound (a parameter must not be reported fixed when it hangs on which of
+    two near-equal optima the search ended in).
+    """
     from dataclasses import replace
 
-    cands, sse, qs, ys = grid
+    cands, sse, qs, ys = fit.grid
     r = predict(best.theta, qs) - ys
-    tau = autocorrelation_time(r)
-    inside = (sse - float(r @ r)) / max(noise, 1e-12) ** 2 / max(tau, 1.0) <= chi2
-    if not inside.any():
-        return out
-    g = cands[inside]
-    cols = {"d_neg": g[:, 0], "d_pos": g[:, 1], "b_pos": g[:, 2], "b_neg": g[:, 3]}
+    tau = max(autocorrelation_time(r), 1.0)
+    var = max(noise, 1e-12) ** 2 * tau
+    inside = (sse - float(r @ r)) / var <= chi2
+    values = [_params_of_geometry(g) for g in cands[inside]]
+    for th in fit.alternatives:
+        ra = predict(th, qs) - ys
+        if (float(ra @ ra) - float(r @ r)) / var <= chi2_ambiguity:
+            values.append(dict(zip(PARAMS, map(float, _params(th)))))
     new = dict(out)
-    for name, v in cols.items():
-        e = out[name]
-        new[name] = replace(e, lo=min(e.lo, float(v.min())), hi=max(e.hi, float(v.max())))
+    for name in ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg"):
+        v = [p[name] for p in values if name in p]
+        if v:
+            e = out[name]
+            new[name] = replace(e, lo=min(e.lo, min(v)), hi=max(e.hi, max(v)))
     return new
+
+
+def _params_of_geometry(g: np.ndarray) -> dict[str, float]:
+    dn, dp, bp, bn, _ = map(float, g)
+    return {"d_neg": dn, "d_pos": dp, "b_pos": bp, "b_neg": bn}
 
 
 def _judged(name: str, e: Estimate, max_halfwidth: float, span: float) -> Estimate:

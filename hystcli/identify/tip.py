@@ -59,8 +59,8 @@ MAX_SAMPLES = 6000
 SEARCH_SAMPLES = 1200
 """Samples the global grid search scores each geometry on."""
 
-N_STARTS = 6
-"""Distinct grid points refined by the local optimiser."""
+N_STARTS = 10
+"""Distinct grid points refined by the local optimiser (a computation budget)."""
 
 # theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
 _LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
@@ -345,11 +345,13 @@ def _initial_states(u0: float, g) -> tuple[float, float, float]:
 
 
 def _distinct_best(cands: np.ndarray, sse: np.ndarray, k: int, span: float) -> list[np.ndarray]:
+    """The ``k`` best geometries that differ from each other in an edge or a backlash by more than
+    3 % of the span: distinct starts, so that loops that fit about as well are each refined."""
     order = np.argsort(sse, kind="stable")
     picked: list[np.ndarray] = []
     for i in order:
         g = cands[i]
-        if all(abs(g[0] - p[0]) > 0.03 * span or abs(g[1] - p[1]) > 0.03 * span for p in picked):
+        if all(np.max(np.abs(g[:4] - p[:4])) > 0.03 * span for p in picked):
             picked.append(g)
         if len(picked) >= k:
             break
@@ -540,6 +542,8 @@ class TipFit:
     grid : tuple
         ``(geometries, sse, qs, ys)``: every geometry the global search scored and its sum of squares
         on the search's samples ``qs, ys`` (:mod:`.intervals` reads distant optima off it).
+    alternatives : tuple of numpy.ndarray
+        The theta of every local optimum the starts reached (the chosen one among them).
     """
 
     model: KnobModel
@@ -553,6 +557,7 @@ class TipFit:
     bic: float = math.nan
     walls: tuple = (None, None)
     grid: tuple = field(default=(), repr=False)
+    alternatives: tuple = field(default=(), repr=False)
 
     @property
     def theta(self) -> np.ndarray:
@@ -650,7 +655,8 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     f_scale = max(3.0 * _robust_sd(r0), 1e-6 * max(1.0, float(np.ptp(y))))
     noise = f_scale / 3.0
     plain = (False, False)
-    best = min((refine_clipped(th, qs, ys, plain, f_scale, noise) for th in thetas), key=lambda f: f.deviance)
+    refined = [refine_clipped(th, qs, ys, plain, f_scale, noise) for th in thetas]
+    best = min(refined, key=lambda f: f.deviance)
     # the winner on the fit's samples, at the scale of its own residuals
     sd = _robust_sd(_clip_residuals(best.p, qf, yf, plain))
     f_scale = max(3.0 * sd, 1e-6 * max(1.0, float(np.ptp(y))))
@@ -676,7 +682,7 @@ def fit_tip(q: np.ndarray, y: np.ndarray, starts: tuple[KnobModel, ...] = (),
     rmse = float(np.sqrt(np.mean((chosen.predict(q) - y) ** 2)))
     return TipFit(model=model, loop=chosen, rmse=rmse, noise=float(_robust_sd(resid)), tau=float(tau),
                   f_scale=float(f_scale), q=qf, y=yf, bic=float(chosen_bic), walls=chosen.walls,
-                  grid=(grid_cands, grid_sse, qs, ys))
+                  grid=(grid_cands, grid_sse, qs, ys), alternatives=tuple(f.theta for f in refined))
 
 
 def systematic_misfit(resid: np.ndarray, fs: float, tau: float, noise: float, level: float) -> tuple[float, bool]:
