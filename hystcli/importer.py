@@ -942,8 +942,8 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     Returns
     -------
     Imported
-        The run (columns in the order of docs/design.md section 6, metadata including ``import``: how it was made) and
-        the :class:`ImportReport`.
+        The run (columns in the order of docs/design.md section 6, metadata including
+        ``import``: how it was made) and the :class:`ImportReport`.
 
     Raises
     ------

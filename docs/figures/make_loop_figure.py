@@ -96,7 +96,8 @@ def draw(path: Path) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("-o", "--out", type=Path, default=OUT, help="the file to write (.svg, or .png to preview)")
+    ap.add_argument("-o", "--out", type=Path, default=OUT,
+                    help="the file to write (.svg, or .png to preview)")
     args = ap.parse_args(argv)
     draw(args.out)
     return 0
