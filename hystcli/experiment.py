@@ -14,7 +14,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
 5. evaluate every run (:func:`hystcli.metrics.evaluate_runs`) into the cells of Table I (1-DoF,
    periodic, shapes straight / alpha = 45 / alpha = 90) and Table II (2-DoF, non-periodic, shape
    alpha_1 = 45, theta_1 = 0; alpha_2 = 45, theta_2 = 90), beside the paper's values;
-6. beyond the paper (issue 5): diagnose the Compensation+Shift runs of each catheter
+6. beyond the paper: diagnose the Compensation+Shift runs of each catheter
    (:func:`hystcli.diagnose.diagnose`, leave one run out), compensate again with the augmented
    model (the base model plus the effects the diagnosis found, detected offsets unchanged) and
    run that fourth controller, ``comp+shift+diag``, on fresh trials whose noise the diagnosis
@@ -72,7 +72,7 @@ CONTROLLERS = ("none", "comp", "comp+shift")
 """The paper's three controllers: No Compensation, Compensation-Only, Compensation+Shift."""
 
 DIAGNOSED = "comp+shift+diag"
-"""Beyond the paper: Compensation+Shift with the model ``hyst diagnose`` augmented (issue 5)."""
+"""Beyond the paper: Compensation+Shift with the model ``hyst diagnose`` augmented."""
 
 BEYOND_FACTOR = 0.5
 """Issue 5, Must-show 2: the diagnosed controller's RMSE at most half the paper's Compensation+Shift."""
@@ -632,7 +632,7 @@ def _commands(model: Model, reference: Run, controller: str, offsets: Mapping[in
     traj = Run(cols, meta)
     if controller == "none":
         return Run({**cols, **{f"q{k}": cols[f"r{k}"] for k in knobs}}, {**meta, "controller": "none"})
-    # the detected offsets ride in the trajectory's metadata, the first source of DESIGN.md
+    # the detected offsets ride in the trajectory's metadata, the first source of docs/design.md
     # section 6's rule, so compensate uses exactly what Algorithm 1 found
     traj = traj.with_meta(**{f"offset{k}": repr(float(offsets[k])) for k in knobs})
     comp = compensate(model, traj, ignore_shift=(controller == "comp")).run
@@ -929,7 +929,7 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
                      "yes" if c.rmse[0] <= target else "NO", _pair(paper["ptpe"]), _pair(ours.ptpe),
                      _pair(c.ptpe)))
     notes = ["Beyond the paper: Compensation+Shift (C+S) with the model `hyst diagnose` augmented",
-             "(mean, std) in deg; target: half the paper's C+S RMSE (issue 5); the diagnosis is fitted on the "
+             "(mean, std) in deg; target: half the paper's C+S RMSE; the diagnosis is fitted on the "
              "C+S runs, the diagnosed controller runs on fresh trials"]
     for d in result.diagnoses:
         notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects, d.forms)}; "

@@ -3,17 +3,17 @@
 This module owns ``hyst import`` (docs/import.md holds the user's view). A *mapping*
 (:class:`ImportMapping`) says how to read one logger's text files: separator, comment prefix,
 header lines to skip, which 1-based column becomes which run column (``t``, ``q1`` ... ``r2`` of
-DESIGN.md section 6) with ``value = raw * scale + offset``, and where the metadata comes from
+docs/design.md section 6) with ``value = raw * scale + offset``, and where the metadata comes from
 (fixed values, regular expressions over the header lines, and over a ``README`` beside the file).
 A *preset* is a named, built-in mapping (:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data
-set of ``../shared/real/mrdlab``).
+set, ``sample_data/real/PROVENANCE.md``).
 
 What real hardware logs need, learnt from that data set and handled here, not by hand-editing:
 
 - incremental encoders, whose zero is arbitrary: ``zero`` = ``none`` (default) / ``first`` /
   ``mean`` subtracts nothing, the first sample, or the mean of each input and output column. The
   default is ``none`` because the offset between runs of one session is information (the hysteresis
-  shift of DESIGN.md section 3 *is* an offset; on the MRDLab data the flipped jaw angle rises by
+  shift of docs/design.md section 3 *is* an offset; on the MRDLab data the flipped jaw angle rises by
   about 1 deg per 10 % of load torque as the cable stretches: the ``stretch`` effect, driven by
   the ``condition`` metadata the preset sets to the load), and the model absorbs any constant
   zero anyway (its ``offset`` and heights). Use ``mean`` when every file was recorded after a
@@ -28,7 +28,7 @@ What real hardware logs need, learnt from that data set and handled here, not by
   after a zero-phase Butterworth anti-alias low-pass at 0.4 x the new rate when it is lower;
 - drift: the output's drift (deg/s, a least-squares ``y ~ gain*q + b + drift*t``) is reported;
   ``detrend`` removes it. Off by default: slow creep is an effect the diagnosis should see
-  (DESIGN.md section 8), not something to erase silently.
+  (docs/design.md section 8), not something to erase silently.
 
 Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) comes back in an
 :class:`ImportReport` beside the converted :class:`~hystcli.io.Run`.
@@ -52,7 +52,7 @@ from .filters import lowpass
 from .io import KNOWN_COLUMNS, Run
 
 TARGETS = KNOWN_COLUMNS
-"""Run columns a mapping may fill (DESIGN.md section 6)."""
+"""Run columns a mapping may fill (docs/design.md section 6)."""
 
 ZERO_MODES = ("none", "first", "mean")
 TIME_REPAIRS = ("error", "drop")
@@ -402,7 +402,7 @@ def load_mapping(path: str | os.PathLike) -> ImportMapping:
 
 
 CURRENT_UNIT = "mA"
-"""The unit of a run's current columns ``c<k>`` (DESIGN.md section 6)."""
+"""The unit of a run's current columns ``c<k>`` (docs/design.md section 6)."""
 
 CURRENT_UNITS = {"A": 1000.0, "mA": 1.0, "uA": 1e-3}
 """Current units a log may state (metadata ``current_unit``; mA when it states none), with the
@@ -432,7 +432,7 @@ MRDLAB = ImportMapping(
         MetaPattern(r"amplitude of ([0-9.]+) degrees", "amplitude_deg"),
         MetaPattern(r"reaction torque of ([0-9.]+) percent", "load_pct"),
         # the load is the run's condition: it drives the condition effects (stretch: the cable
-        # yields to the resistive torque; DESIGN.md section 8), as the shape does for a catheter
+        # yields to the resistive torque; docs/design.md section 8), as the shape does for a catheter
         MetaPattern(r"reaction torque of ([0-9.]+) percent", "condition"),
     ),
     meta_from_readme=(
@@ -869,7 +869,7 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     meta.update(_render_meta({str(k): str(v) for k, v in options.meta.items()}, found, source))
     meta.setdefault("source_file", Path(source).name)
 
-    # motor current in mA, the unit of a run (DESIGN.md section 6), from the unit the log states
+    # motor current in mA, the unit of a run (docs/design.md section 6), from the unit the log states
     unit = meta.get("current_unit", CURRENT_UNIT)
     if "current_unit" not in meta and any(name[0] == "c" for name in cols):
         warnings.append(f"the log states no current unit: the current is taken to be in {CURRENT_UNIT} "
@@ -885,7 +885,7 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
         # (4 decimals of A stay 0.1 mA, not 1e-4 mA), then again so x1000 leaves no float dust
         cols[name] = _round(_round(cols[name], options.decimals) * to_ma, options.decimals)
 
-    # the run's column order of DESIGN.md section 6, whatever the mapping's order
+    # the run's column order of docs/design.md section 6, whatever the mapping's order
     ordered = {name: _round(cols[name], options.decimals) for name in TARGETS if name in cols}
     if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
         raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
@@ -942,8 +942,8 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     Returns
     -------
     Imported
-        The run (columns in DESIGN.md order, metadata including ``import``: how it was made) and
-        the :class:`ImportReport`.
+        The run (columns in the order of docs/design.md section 6, metadata including
+        ``import``: how it was made) and the :class:`ImportReport`.
 
     Raises
     ------

@@ -2,7 +2,7 @@
 
 A model file holds numbers a user wants to see side by side: each knob's parameters with the
 one-sigma uncertainty identification gave them, the edges they imply (the far edges
-``dhat_pos``/``dhat_neg`` of DESIGN.md section 3 and the shifted edges ``d~ = d + offset``),
+``dhat_pos``/``dhat_neg`` of docs/design.md section 3 and the shifted edges ``d~ = d + offset``),
 what identification learnt from the current (the slopes and level ``detect-shift`` uses), the
 effects ``diagnose`` added, the geometry. Two models of one catheter (straight against shifted,
 before against after diagnosis) differ in a few of these: :func:`diff_table` lines them up.
@@ -75,7 +75,7 @@ def effects_table(model: Model) -> Table | None:
         return None
     rows = tuple((e.name, p, float(v)) for e in model.effects for p, v in e.params.items())
     return Table(("effect", "parameter", "value"), ("effect", "parameter", "value"), rows,
-                 ("unmodelled effects of DESIGN.md section 8, run by predict and compensate",))
+                 ("unmodelled effects of docs/design.md section 8, run by predict and compensate",))
 
 
 def model_summary(model: Model) -> dict[str, Any]:
@@ -135,7 +135,7 @@ def envelope_figure(model: Model, fmt: str = "png", q_range: Sequence[float] | N
     """Each knob's two envelopes against the knob angle, shifted by its offset, as file bytes.
 
     The ascending envelope ``f_up`` (loading: lines L2-L4) and the descending ``f_dn``
-    (unloading: L8-L6) of DESIGN.md section 3, with the shifted dead-zone edges and the far edges
+    (unloading: L8-L6) of docs/design.md section 3, with the shifted dead-zone edges and the far edges
     marked; between them lies every state the knob can hold. Drawn with matplotlib's ``Figure``
     API (no global backend switch).
 

@@ -1,6 +1,6 @@
 """Run CSV files and model JSON files: read, validate at the boundary, write atomically.
 
-Formats are DESIGN.md section 6. A run CSV is optional ``# key: value`` metadata lines, a header
+Formats are docs/design.md section 6. A run CSV is optional ``# key: value`` metadata lines, a header
 row and numeric rows; a model JSON is ``{"format": "hyst-model", "version": 1, "knobs": ...}``.
 Every reader raises :class:`~hystcli.errors.DataError` or :class:`~hystcli.errors.ModelError`
 with a message that names the file and the problem; every writer writes a temporary file beside
@@ -608,7 +608,7 @@ def _identification_of(d: dict, source: str, key: str) -> KnobIdentification:
 
 
 def model_to_dict(model: Model) -> dict:
-    """The JSON-ready dict of a model (DESIGN.md section 6)."""
+    """The JSON-ready dict of a model (docs/design.md section 6)."""
     out: dict = {"format": MODEL_FORMAT, "version": MODEL_VERSION,
                  "knobs": {str(k): v.params() for k, v in model.knobs.items()}}
     if model.geometry is not None:

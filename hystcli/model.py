@@ -1,6 +1,6 @@
 """The dead-zone + backlash hysteresis model of one knob and of a two-knob catheter.
 
-This module owns the equations of the paper's section II (Kim & Mansi) as fixed by DESIGN.md
+This module owns the equations of the paper's section II (Kim & Mansi) as fixed by docs/design.md
 section 3: the two envelopes, the forward clamp recursion, its exact inverse (compensation), the
 shift of the model by an ``offset``, the shift a known shaft shape causes (paper eqs. 1-4) and the
 update of both knobs' offsets for a bulk rotation of the catheter body.
@@ -31,7 +31,7 @@ from .errors import ModelError
 from .estimate import Estimate
 
 PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
-"""The parameters of one knob in file order (DESIGN.md section 6)."""
+"""The parameters of one knob in file order (docs/design.md section 6)."""
 
 PAPER_OMEGA = 1.45
 """The paper's average slope omega (section III: "We used omega as 1.45 as the average value")."""
@@ -141,7 +141,7 @@ class KnobModel:
     ------
     ModelError
         When a parameter is not finite or the parameters violate a validity condition of
-        DESIGN.md section 3 (the message names the condition).
+        docs/design.md section 3 (the message names the condition).
     """
 
     d_pos: float
@@ -463,7 +463,7 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 
     Rotating the body by :math:`\\delta` turns every segment's :math:`\\theta_i` into
     :math:`\\theta_i - \\delta` in the handle's frame, which rotates the vector
-    :math:`(offset_1, offset_2)` of eqs. 3-4 by :math:`-\\delta` (DESIGN.md section 3; the paper
+    :math:`(offset_1, offset_2)` of eqs. 3-4 by :math:`-\\delta` (docs/design.md section 3; the paper
     leaves this case out).
     """
     c, s = math.cos(math.radians(delta_deg)), math.sin(math.radians(delta_deg))
@@ -475,7 +475,7 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EffectSpec:
-    """An unmodelled effect attached to a model (DESIGN.md section 8): its name, parameters and
+    """An unmodelled effect attached to a model (docs/design.md section 8): its name, parameters and
     form ("" for the effect's default form, which is what a version 1 entry without one means)."""
 
     name: str
@@ -716,7 +716,7 @@ class Model:
         return compensate(self, reference, ignore_shift=ignore_shift)
 
     def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
-        """Which offset each knob uses for a run with metadata ``meta`` (DESIGN.md section 6).
+        """Which offset each knob uses for a run with metadata ``meta`` (docs/design.md section 6).
 
         The run's ``offsetK`` when present, else the shift the model's geometry gives for the
         run's ``shape``, else the model's own offset.

@@ -1,12 +1,12 @@
 """The virtual catheter: a seeded simulator of the physical system the paper measured.
 
 It owns the true parameters of named virtual catheters, the motions of the paper's protocol
-(sweep, periodic, non-periodic), the motor-current model of DESIGN.md section 4, the sensor chain
+(sweep, periodic, non-periodic), the motor-current model of docs/design.md section 4, the sensor chain
 (EM-tracker noise, 20 Hz Butterworth) and two ways to run it: :func:`simulate` (a whole run at
 once; the demo, the tests, the sample data, ``hyst simulate`` through :func:`simulate_motion`)
 and :class:`LiveTwin` (move by move, for the serial emulator), which carry the same states and
 so give the same samples. The tip angle comes from :mod:`hystcli.effects` (the base model of
-DESIGN.md section 3 plus the unmodelled effects of section 8); this module adds the current.
+docs/design.md section 3 plus the unmodelled effects of section 8); this module adds the current.
 
 Motor current (signed, mA), for the tendon input ``u`` (the knob angle seen through the coupling
 and rate effects) relative to the shifted edges::
@@ -121,7 +121,7 @@ class VirtualCatheter:
                      meta={"catheter": self.name})
 
 
-# Two plain virtual catheters with DESIGN.md section 6's example knob (and one like it): fixed
+# Two plain virtual catheters with docs/design.md section 6's example knob (and one like it): fixed
 # reference plants for tests and benches, with no effects by default; beta_catheter / beta_knob
 # from a 10 Fr shaft (tendons ~1.2 mm off axis) and an 8 mm knob pulley. The catheters users
 # simulate and the sample data was recorded on, ice-a and ice-b, are the calibrated ones of
@@ -152,7 +152,7 @@ def get_catheter(name: str) -> VirtualCatheter:
 
 
 # --------------------------------------------------------------------------------------------
-# motions of the paper's protocol (DESIGN.md section 7)
+# motions of the paper's protocol (docs/design.md section 7)
 # --------------------------------------------------------------------------------------------
 def time_axis(duration: float, fs: float) -> np.ndarray:
     """Sample times ``0, 1/fs, ...`` covering ``duration`` seconds."""

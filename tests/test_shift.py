@@ -18,7 +18,7 @@ from hystcli.model import Geometry, KnobIdentification, KnobModel, Model, Shape
 from hystcli.shift import (AFTER_STEPS, DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
                            apply_shift, default_max_travel, detect_shift, plot_shift, resolve_thresholds)
 
-# A catheter of the twin fixed here (DESIGN.md section 6's example knob and a second knob like
+# A catheter of the twin fixed here (docs/design.md section 6's example knob and a second knob like
 # it), so these tests do not move when the shared virtual catheters are recalibrated.
 CURRENT = twin.CurrentParams()  # no_load 120 mA, coulomb 6 mA, k_load 4 mA/deg, mu 0.25, noise 3 mA
 CATHETER = twin.VirtualCatheter(
@@ -154,7 +154,7 @@ def test_replay_that_never_leaves_the_dead_zone_is_an_error_not_an_offset():
 # a probe over a current law written by hand (edges known exactly)
 # --------------------------------------------------------------------------------------------
 class LawProbe:
-    """Signed motor current of DESIGN.md section 4 with edges ``[dn, dp]``, an optional wall,
+    """Signed motor current of docs/design.md section 4 with edges ``[dn, dp]``, an optional wall,
     Coulomb friction by direction, and seeded noise."""
 
     def __init__(self, dn, dp, start=0.0, wall=None, noise=0.3, seed=0, fail_at=None,

@@ -254,7 +254,7 @@ def rotate_shift_cmd(
 ) -> None:
     """Update both knobs' offsets after a bulk rotation of the catheter body, without moving a knob.
 
-    The vector (offset1, offset2) rotates by -degrees (DESIGN.md section 3; the paper leaves
+    The vector (offset1, offset2) rotates by -degrees (docs/design.md section 3; the paper leaves
     this case out).
     """
     import math
