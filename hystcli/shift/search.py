@@ -190,9 +190,11 @@ class _Search:
     skipped: dict = field(default_factory=dict)
     turns: int = 0
     limits: int = 0
+    seg_mark: int | None = None
 
     def __post_init__(self) -> None:
         self.start = float(self.probe.position())
+        self.seg_mark = getattr(self.probe, "mark", None)
         self.z = NormalDist().inv_cdf(0.5 + 0.5 * self.settings.level)
         self.at_rest = not getattr(self.probe, "reads_moving", True)
 
@@ -232,6 +234,7 @@ class _Search:
         self.direction = -self.direction
         self.turns += 1
         self.seg_q, self.seg_c = self.seg_q[-1:], self.seg_c[-1:]
+        self.seg_mark = getattr(self.probe, "mark", None)
 
     # -- level tests ------------------------------------------------------------------------
     def _band(self, noise: float) -> float:
@@ -366,7 +369,37 @@ class _Search:
             got, _ = self._read_segment()
             if got is not None and got.direction == edge.direction:
                 best = got
-        return best
+        return self._read_record(best)
+
+    def _read_record(self, edge: _Edge) -> _Edge:
+        """The edge placed again on every sample the probe passed since the last turn, where the
+        probe keeps them (a replay holds the whole record between the steps): the same broken
+        line, read on all the samples instead of one median per step."""
+        if self.seg_mark is None or not hasattr(self.probe, "samples_since"):
+            return edge
+        from ..signal.reading import bin_stretch
+
+        q, c, t = self.probe.samples_since(self.seg_mark)
+        d = edge.direction
+        keep = d * np.diff(q, prepend=q[0]) >= 0
+        if keep.sum() < 3 * MIN_READINGS:
+            return edge
+        if self.ref.ripple is not None:
+            c = c - self.ref.ripple(q)
+        x, y, w, _ = bin_stretch(d * q[keep], c[keep], t[keep], self.settings.filter_hz)
+        order = np.argsort(x, kind="stable")
+        x, y, w = x[order], y[order], w[order]
+        fit = fit_piecewise(x, y, w, max_pieces=min(self.settings.max_pieces, 4))
+        _, j, _ = _classify(fit, self.ref.sign, d, self.z)
+        if j is None or abs(d * fit.knots[j] - edge.at) > max(edge.hi - edge.lo, 2.0 * self.step):
+            return edge
+        lo, hi = knot_interval(fit, j, self.settings.chi2)
+        a, b = d * lo, d * hi
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return edge
+        return _Edge(direction=d, at=d * fit.knots[j], lo=min(a, b), hi=max(a, b), statistic=edge.statistic,
+                     threshold=edge.threshold, level=edge.level, slope_before=edge.slope_before,
+                     slope_after=edge.slope_after, n_before=edge.n_before, n_after=edge.n_after, noise=edge.noise)
 
 
 def _threshold(false_alarm: float, n: int, max_steps: int, dof: int) -> float:
@@ -394,7 +427,7 @@ def _offset_interval(edge: _Edge, ref: Reference) -> tuple[float, float]:
 
 def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings = DEFAULT,
                  eps_upper: float | None = None, step: float = 0.5, max_steps: int | None = None,
-                 max_travel: float | None = None, direction: int = 1, return_home: bool = True,
+                 max_travel: float | None = None, direction: int | None = None, return_home: bool = True,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
     """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
@@ -413,8 +446,9 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         Unit step :math:`u` (deg).
     max_steps, max_travel : optional
         Step and travel limits (default: room to cross the dead zone and back; the sweep's reach).
-    direction : int
-        Initial direction (+1 as in the paper, or -1).
+    direction : int, optional
+        Initial direction (+1 as in the paper, or -1); default the way a replay's record goes first
+        (a search the other way would walk the record through its own turn), else +1.
     return_home : bool
         Return the knob to where it began after a successful search too (a failed one always does).
     progress : callable, optional
@@ -430,6 +464,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     k = int(knob)
     km = model.knob(k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
+    if direction is None:
+        direction = int(getattr(probe, "first_direction", 1))
     max_travel = default_max_travel(model, k) if max_travel is None else float(max_travel)
     _check_options(step, max_travel, max_steps, direction)
     if not ref.edges:
