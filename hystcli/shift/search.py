@@ -85,7 +85,7 @@ def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN
         return Estimate(tip_edge, tip_edge, tip_edge), "model", ""
     ce = ident.current_edges.get(side)
     if ce is None or not ce.fixed:
-        why = "it did not show" if ce is None else "it left open"
+        why = "did not show" if ce is None else f"did not fix ({ce.reason})"
         return None, "current", (f"the identification sweep's current {why} where the {side} tendon is taken up, "
                                  f"so an offset from that side has no reference")
     tip_est = ident.estimates.get(name)
