@@ -14,7 +14,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
 5. evaluate every run (:func:`hystcli.metrics.evaluate_runs`) into the cells of Table I (1-DoF,
    periodic, shapes straight / alpha = 45 / alpha = 90) and Table II (2-DoF, non-periodic, shape
    alpha_1 = 45, theta_1 = 0; alpha_2 = 45, theta_2 = 90), beside the paper's values;
-6. beyond the paper (issue 5): diagnose the Compensation+Shift runs of each catheter
+6. beyond the paper: diagnose the Compensation+Shift runs of each catheter
    (:func:`hystcli.diagnose.diagnose`, leave one run out), compensate again with the augmented
    model (the base model plus the effects the diagnosis found, detected offsets unchanged) and
    run that fourth controller, ``comp+shift+diag``, on fresh trials whose noise the diagnosis
@@ -46,6 +46,7 @@ from __future__ import annotations
 import io as _io
 import json
 import math
+import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -72,10 +73,11 @@ CONTROLLERS = ("none", "comp", "comp+shift")
 """The paper's three controllers: No Compensation, Compensation-Only, Compensation+Shift."""
 
 DIAGNOSED = "comp+shift+diag"
-"""Beyond the paper: Compensation+Shift with the model ``hyst diagnose`` augmented (issue 5)."""
+"""Beyond the paper: Compensation+Shift with the model ``hyst diagnose`` augmented."""
 
 BEYOND_FACTOR = 0.5
-"""Issue 5, Must-show 2: the diagnosed controller's RMSE at most half the paper's Compensation+Shift."""
+"""The target beyond the paper: the diagnosed controller's RMSE at most half the paper's
+Compensation+Shift."""
 
 SCENARIOS_1DOF = ("straight", "alpha=45", "alpha=90")
 """Columns of Table I: the shaft shapes of the 1-DoF periodic runs (paper section III-A)."""
@@ -119,7 +121,7 @@ PAPER_IMPROVEMENT: Mapping[str, Mapping[str, tuple[float, float]]] = MappingProx
 """The paper's improvement rates of Compensation+Shift (vs none, vs comp), source: Kim & Mansi."""
 
 TOLERANCE = 0.30
-"""Issue 3, Must-show 1: every cell within 30 % of the paper's."""
+"""How close every cell must come to the paper's: within 30 %."""
 
 DETECT_MAX_TRAVEL = 60.0
 """Travel limit of Algorithm 1 in the demo (deg of knob). The calibrated catheters have dead
@@ -898,7 +900,7 @@ def comparison_table(result: ExperimentResult, table: str) -> metrics.Table:
              "(mean, std) in deg over catheters x knobs x trials; paper: Kim & Mansi, Table " + table
              + f"; ok = ours within {TOLERANCE:.0%} of the paper's mean; improvement rate of "
                "Compensation+Shift against No Compensation and Compensation-Only")
-    return metrics.Table(cols, heads, tuple(rows), notes)
+    return metrics.Table(cols, heads, tuple(rows), notes, keys=2)
 
 
 def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]], forms: Sequence[str] = ()) -> str:
@@ -929,7 +931,7 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
                      "yes" if c.rmse[0] <= target else "NO", _pair(paper["ptpe"]), _pair(ours.ptpe),
                      _pair(c.ptpe)))
     notes = ["Beyond the paper: Compensation+Shift (C+S) with the model `hyst diagnose` augmented",
-             "(mean, std) in deg; target: half the paper's C+S RMSE (issue 5); the diagnosis is fitted on the "
+             "(mean, std) in deg; target: half the paper's C+S RMSE; the diagnosis is fitted on the "
              "C+S runs, the diagnosed controller runs on fresh trials"]
     for d in result.diagnoses:
         notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects, d.forms)}; "
@@ -950,19 +952,22 @@ def shift_table(result: ExperimentResult) -> metrics.Table:
     return metrics.Table(cols, heads, rows, (
         "Algorithm 1 on the replays",
         "deg; error = detected - true offset; edge error = found - true edge (the search's own error: "
-        "the offset also carries the identified model's error in D, offset = edge - D)"))
+        "the offset also carries the identified model's error in D, offset = edge - D)"), keys=3)
 
 
 def _section(table: metrics.Table, fmt: str) -> str:
     """One titled table: ``notes[0]`` is the title, ``notes[1]`` the note under it, any further
     notes a list below that."""
     title, note, *items = table.notes
-    body = metrics.Table(table.columns, table.headers, table.rows)
+    body = metrics.Table(table.columns, table.headers, table.rows, keys=table.keys)
     if fmt == "markdown":
         listed = "".join(f"- {line}\n" for line in items)
         return f"**{title}**\n\n" + metrics.format_markdown(body) + f"\n{note}\n" + (f"\n{listed}" if items else "")
-    listed = "".join(f"  {line}\n" for line in items)
-    return f"{title}\n\n" + metrics.format_text(body) + f"\n{note}\n{listed}"
+    width = metrics.TEXT_WIDTH
+    listed = "".join(textwrap.fill(line, width, initial_indent="  ", subsequent_indent="    ",
+                                   break_on_hyphens=False) + "\n" for line in items)
+    return (f"{title}\n\n" + metrics.format_text(body) + "\n"
+            + textwrap.fill(note, width, break_on_hyphens=False) + f"\n{listed}")
 
 
 def render(result: ExperimentResult, fmt: str = "table") -> str:

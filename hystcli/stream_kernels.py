@@ -1,4 +1,4 @@
-"""The coupling's per-sample fixed point of :class:`hystcli.Compensator`, compiled (issue 13).
+"""The coupling's per-sample fixed point of :class:`hystcli.Compensator`, compiled.
 
 A two-knob model whose inverse chain reads the other knob (``coupling``) solves, per sample, the
 same fixed-point iteration the batch inverse runs over a whole run: each pass restarts both

@@ -142,7 +142,7 @@ def test_usage_errors_exit_2(files, tmp_path):
 
 def test_help_has_an_example():
     res = runner.invoke(app, ["detect-shift", "--help"])
-    assert res.exit_code == 0 and "hyst detect-shift --model" in res.stdout
+    assert res.exit_code == 0 and "hyst detect-shift sample_data/ice-a/replay_alpha90_knob1.csv --model" in res.stdout
 
 
 def test_the_readme_walk_through_steps_1_and_2(tmp_path):
