@@ -1,12 +1,15 @@
 """Foreign logs to run CSVs: column mappings, presets, and the conditioning real data needs.
 
-This module owns ``hyst import`` (docs/import.md holds the user's view). A *mapping*
-(:class:`ImportMapping`) says how to read one logger's text files: separator, comment prefix,
-header lines to skip, which 1-based column becomes which run column (``t``, ``q1`` ... ``r2`` of
-DESIGN.md section 6) with ``value = raw * scale + offset``, and where the metadata comes from
-(fixed values, regular expressions over the header lines, and over a ``README`` beside the file).
-A *preset* is a named, built-in mapping (:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data
-set of ``../shared/real/mrdlab``).
+This module owns ``hyst import`` and the ``--columns`` option of the other commands
+(docs/import.md holds the user's view). A *mapping* (:class:`ImportMapping`) says how to read one
+logger's text files: separator, comment prefix, header lines to skip, which column (by its name
+in the header row, or its number from 1) becomes which run column (``t``, ``q1`` ... ``r2`` of
+DESIGN.md section 6) in which unit or with ``value = raw * scale + offset``, and where the metadata
+comes from (fixed values, regular expressions over the header lines, and over a ``README`` beside
+the file). The separator, the comment lines and the header row may be left to the file itself
+(``auto``: :func:`split_table`). A *preset* is a named, built-in mapping (:data:`PRESETS`;
+``mrdlab`` for the MRDLab EndoWrist data set of ``../shared/real/mrdlab``). ``--columns``
+(:func:`columns_mapping`, :func:`read_mapped`) reads a user's own CSV as a run without writing one.
 
 What real hardware logs need, learnt from that data set and handled here, not by hand-editing:
 

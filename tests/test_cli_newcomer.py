@@ -67,6 +67,25 @@ def test_check_tells_a_users_csv_what_to_type_and_then_passes_it(mine):
                                           "columns t, q1, y1, c1")
 
 
+def test_check_exits_0_with_warnings_only_and_quiet_prints_the_errors(tmp_path):
+    run = read_run(SWEEP)
+    flat = Run({**run.columns, "y1": np.zeros(len(run))}, run.meta)  # a tip sensor not connected
+    write_run(tmp_path / "flat.csv", flat)
+    write_run(tmp_path / "nan.csv", run)
+    text = (tmp_path / "nan.csv").read_text().splitlines()
+    text[20] = text[20].rsplit(",", 1)[0] + ",nan"  # line 21: one missing current
+    (tmp_path / "nan.csv").write_text("\n".join(text) + "\n")
+    res = invoke("check", tmp_path / "flat.csv")
+    assert res.exit_code == 0, res.output
+    assert res.stdout.splitlines()[0].startswith(f"{tmp_path / 'flat.csv'}: warning: y1: the tip never moves")
+    res = invoke("check", tmp_path / "flat.csv", tmp_path / "nan.csv")
+    assert res.exit_code == 1
+    assert res.stdout.splitlines()[-1] == "1 error(s), 1 warning(s) in 2 file(s)"
+    res = invoke("check", tmp_path / "flat.csv", tmp_path / "nan.csv", "-q")
+    assert res.exit_code == 1 and res.stdout.splitlines() == [
+        f"{tmp_path / 'nan.csv'}: error: c1: 1 missing value(s) (empty or NaN), the first at line 21"]
+
+
 def test_identify_with_columns_reads_a_users_csv_as_the_run(mine):
     ours = invoke("identify", mine / "mine.tsv", "--columns", COLUMNS, "--format", "json")
     assert ours.exit_code == 0, ours.output

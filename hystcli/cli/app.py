@@ -270,9 +270,10 @@ KnobsAliasOpt = Annotated[Optional[List[str]], typer.Option("--knobs", hidden=Tr
 
 def one_of(value: Any, alias: Any, name: str, alias_name: str) -> Any:
     """The value given under an option's name or under its hidden old alias (usage error: both)."""
-    if value is not None and alias is not None and value != []:
+    given = [v for v in (value, alias) if v is not None and v != [] and v != ()]
+    if len(given) == 2:
         usage_error(f"give {name} once (not also {alias_name}, its old spelling)", name)
-    return alias if value is None or value == [] else value
+    return given[0] if given else None
 
 
 def parse_knobs(values: Optional[List[str]], option: str = "--knob", most: int = 2) -> tuple[int, ...] | None:

@@ -8,8 +8,8 @@ from typing import Annotated, List
 
 import typer
 
-from .app import (ColumnsOpt, FormatOpt, OutputFormat, QuietOpt, columns_mapping, command, distinct_inputs,
-                  echo_json, echo_table, prints)
+from .app import (ColumnsOpt, FormatOpt, OutputFormat, columns_mapping, command, distinct_inputs,
+                  echo_json, echo_table)
 
 
 class CurrentSign(str, Enum):
@@ -40,21 +40,21 @@ def check_cmd(
                                "for the other tendon), or its magnitude |I| (that check is left out).")
     ] = CurrentSign.signed,
     fmt: FormatOpt = OutputFormat.table,
-    quiet: QuietOpt = False,
+    quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print the errors only (not the warnings, "
+                                                              "not the files without a problem).")] = False,
 ) -> None:
     from ..check import check_file
 
     distinct_inputs(runs)
     mapping = columns_mapping(columns)
     reports = [check_file(p, mapping, current_sign.value) for p in runs]
-    if prints(fmt, quiet):
-        if fmt == OutputFormat.json:
-            echo_json({"ok": all(r.ok for r in reports), "files": [r.to_dict() for r in reports]})
-        elif fmt == OutputFormat.table:
-            for line in render_lines(reports):
-                typer.echo(line)
-        else:
-            echo_table(problem_table(reports), fmt)
+    if fmt == OutputFormat.json:
+        echo_json({"ok": all(r.ok for r in reports), "files": [r.to_dict() for r in reports]})
+    elif fmt == OutputFormat.table:
+        for line in render_lines(reports, errors_only=quiet):
+            typer.echo(line)
+    else:
+        echo_table(problem_table(reports), fmt)
     if not all(r.ok for r in reports):
         raise typer.Exit(1)
 
@@ -68,9 +68,12 @@ def _summary(report) -> str:  # noqa: ANN001 - check.CheckReport
     return "; ".join(bits)
 
 
-def render_lines(reports) -> list[str]:  # noqa: ANN001 - sequence of check.CheckReport
+def render_lines(reports, errors_only: bool = False) -> list[str]:  # noqa: ANN001 - sequence of check.CheckReport
     """``FILE: LEVEL: WHERE: message`` per problem (the form compilers use, so editors can jump to
-    it), a summary line per file without problems, and a last line counting them."""
+    it), a summary line per file without problems, and a last line counting them; with
+    ``errors_only`` (``--quiet``) the error lines alone."""
+    if errors_only:
+        return [f"{r.source}: {p.level}: {p.where}: {p.message}" for r in reports for p in r.errors]
     lines = []
     for r in reports:
         if not r.problems:
