@@ -1,6 +1,6 @@
 """hyst: shape-adaptive hysteresis calibration and evaluation for tendon-driven catheter robots.
 
-The Python surface (DESIGN.md section 9)::
+The Python surface (docs/design.md section 9)::
 
     import hystcli
     m = hystcli.load_model("model.json")     # -> Model

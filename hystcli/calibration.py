@@ -2,7 +2,7 @@
 
 This module owns the *values* of the virtual catheters the demo and the sample data use: their
 true hysteresis per knob, their tendon geometry (which sets the shift per shape, paper eqs. 1-4)
-and the unmodelled effects they have by default (DESIGN.md section 8). The twin
+and the unmodelled effects they have by default (docs/design.md section 8). The twin
 (:mod:`hystcli.twin`) owns the physics; this module only chooses numbers, each with the reason
 it has its value. They were chosen so that the paper's whole protocol run through our own core
 (:func:`hystcli.experiment.run_protocol`, ``hyst demo``) lands within 30 % of every cell of the
@@ -75,7 +75,7 @@ def _knob(d_pos: float, d_neg: float, b_pos: float, b_neg: float, omega: float) 
 
 
 # --------------------------------------------------------------------------------------------
-# the unmodelled effects every calibrated catheter has (DESIGN.md section 8)
+# the unmodelled effects every calibrated catheter has (docs/design.md section 8)
 # --------------------------------------------------------------------------------------------
 _DEFAULT_EFFECTS: tuple[tuple[str, dict[str, float]], ...] = (
     # Viscoelastic creep of the polymer shaft and bending section: 26 % of every tip move arrives

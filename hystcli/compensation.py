@@ -1,7 +1,7 @@
 """Compensation of desired trajectories and the model's prediction of a run, as run files.
 
 ``compensate`` turns desired tip angles ``r<k>`` into knob commands ``q<k>`` through the inverse
-of the model's chain (DESIGN.md section 3 and the model's effects, :func:`hystcli.effects.inverse`;
+of the model's chain (docs/design.md section 3 and the model's effects, :func:`hystcli.effects.inverse`;
 with no effects, exactly each knob's inverse), shifted by the offset in effect for the trajectory
 (the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
 Compensation-Only). ``predict`` runs the chain forward on a run's commands: the "sim" that the
@@ -29,7 +29,7 @@ class Compensation:
     ----------
     run : Run
         The trajectory with ``q<k>`` added and metadata ``controller``, ``offset<k>`` (the shift
-        in effect, DESIGN.md section 6) and, for Compensation-Only, ``shift_ignored: true``.
+        in effect, docs/design.md section 6) and, for Compensation-Only, ``shift_ignored: true``.
     offsets : dict of int to float
         Offset the commands used per knob (deg): the shift in effect, or 0 with ``ignore_shift``.
     warnings : tuple of str
@@ -61,7 +61,7 @@ def knobs_of(model: Model, run: Run, prefix: str, what: str, name: str | None = 
 def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Compensation:
     """Knob commands that make the model (with its effects, if any) follow the desired tip angles.
 
-    Without effects this is the exact inverse of DESIGN.md section 3; with the effects
+    Without effects this is the exact inverse of docs/design.md section 3; with the effects
     ``hyst diagnose`` added to the model, :func:`hystcli.effects.inverse` undoes them stage by
     stage as well (the same call: no effects is the chain with no stage).
 
@@ -73,7 +73,7 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
         Desired tip angles ``r1`` and/or ``r2`` with time ``t``.
     ignore_shift : bool
         Use offset 0 for every knob (Compensation-Only) instead of the offset in effect
-        (Compensation+Shift; which offset is DESIGN.md section 6's rule, :meth:`Model.offsets_for`).
+        (Compensation+Shift; which offset is docs/design.md section 6's rule, :meth:`Model.offsets_for`).
 
     Returns
     -------
@@ -84,7 +84,7 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     The output's ``offset<k>`` is the shift in effect for the trajectory even when
     ``ignore_shift`` leaves it out of the commands (then ``shift_ignored: true`` says so): a run
     played from these commands is then predicted, evaluated and diagnosed with the shaft's shift,
-    which the tip undergoes whatever the controller assumed. (DESIGN.md section 6 calls
+    which the tip undergoes whatever the controller assumed. (docs/design.md section 6 calls
     ``offset<k>`` "the shift in effect for this run, as detected" and also "the offsets compensate
     used"; for Compensation-Only the two differ, and the first is what predictions need.)
     """
@@ -126,7 +126,7 @@ def predict_tip(model: Model, run: Run) -> dict[int, np.ndarray]:
     """Tip angle the model (with its effects, if any) predicts for the run's commands ``q<k>``.
 
     Each knob uses the offset in effect for the run (:meth:`Model.offsets_for`) and starts from
-    the run's first measured ``y<k>`` when there is one, else from 0 (DESIGN.md section 3).
+    the run's first measured ``y<k>`` when there is one, else from 0 (docs/design.md section 3).
     """
     knobs = knobs_of(model, run, "q", "knob command")
     ys = chain.predict(model, run)

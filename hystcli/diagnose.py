@@ -1,5 +1,5 @@
 """The sim-to-real gap: where the model departs from measurement, which effect causes it, how far
-adding that effect closes it, checked on whole runs the fit never saw (DESIGN.md section 8).
+adding that effect closes it, checked on whole runs the fit never saw (docs/design.md section 8).
 
 Three questions, one :func:`diagnose` call:
 
@@ -813,7 +813,7 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
     if candidates is None:
         # an effect driven by a stated condition (stretch under a load) is a default candidate
         # only when some run states one: on catheter runs the shape's pull on the cable path is
-        # the shift of the dead zone (DESIGN.md section 3), which an output offset would duplicate
+        # the shift of the dead zone (docs/design.md section 3), which an output offset would duplicate
         stated = any(E.run_condition(r.meta, n) is not None for r, n in zip(runs, names))
         cands = [n for n in E.EFFECTS if n not in have and (stated or E.EFFECTS[n].driver != "condition")]
     else:

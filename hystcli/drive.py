@@ -12,7 +12,7 @@ lags were named latency with held-out RMSEs within 1-2 % of each other, both at 
 but they sit on different sides of the tendons, and the identification sweep's current says which.
 
 :func:`tip_behind_current` reads it: per knob and side, the loading edge the sweep's current
-shows (:func:`hystcli.identify.current.read_current`) against the edge of the loop identified
+shows (:func:`hystcli.signal.reading.read_current`) against the edge of the loop identified
 from the same sweep's tip, divided by the knob speed at the crossing: seconds the tip trails the
 current there. On the design seeds' lag and latency cases (suite seeds 0, 91, 92): input lags
 0.01-0.2 s against their 0.07-0.66 s (at most 0.3 of it); output lags and latencies 0.9-1.6 of
@@ -30,11 +30,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import HystError
-from .identify.current import conditioned_current, read_current
-from .identify.sweep import check_sweep
 from .io import Run
 from .model import Model
+from .signal.reading import read_current
 
 MIN_SPEED = 2.0
 """Knob speed (deg/s) at an edge crossing below which a reading is not used: the edges' reading
@@ -94,19 +92,16 @@ def tip_behind_current(model: Model, sweep: Run) -> TipBehindCurrent | None:
     t = np.asarray(sweep["t"], float)
     readings = []
     for k, kn in model.knobs.items():
-        c = conditioned_current(sweep, k) if f"q{k}" in sweep else None
-        if c is None or c.size < 20:
+        if f"q{k}" not in sweep or f"c{k}" not in sweep or len(sweep) < 20:
             continue
         q = np.asarray(sweep[f"q{k}"], float)
-        try:
-            reading = read_current(q, c, t, check_sweep(sweep, k, need_current=True))
-        except HystError:
-            continue
+        reading = read_current(q, np.asarray(sweep[f"c{k}"], float), t)
         v = np.gradient(q, t)
         for side, d, tip_edge in (("pos", 1, kn.d_pos), ("neg", -1, kn.d_neg)):
-            at = reading.edges.get(side)
-            if at is None:
+            e = reading.edges.get(side)
+            if e is None or not e.fixed:
                 continue
+            at = e.value
             near = (np.abs(q - at) < 1.0) & (d * v > 0)
             if not near.any():
                 continue

@@ -634,7 +634,7 @@ def _commands(model: Model, reference: Run, controller: str, offsets: Mapping[in
     traj = Run(cols, meta)
     if controller == "none":
         return Run({**cols, **{f"q{k}": cols[f"r{k}"] for k in knobs}}, {**meta, "controller": "none"})
-    # the detected offsets ride in the trajectory's metadata, the first source of DESIGN.md
+    # the detected offsets ride in the trajectory's metadata, the first source of docs/design.md
     # section 6's rule, so compensate uses exactly what Algorithm 1 found
     traj = traj.with_meta(**{f"offset{k}": repr(float(offsets[k])) for k in knobs})
     comp = compensate(model, traj, ignore_shift=(controller == "comp")).run

@@ -4,19 +4,20 @@ This module owns ``hyst import`` and the ``--columns`` option of the other comma
 (docs/import.md holds the user's view). A *mapping* (:class:`ImportMapping`) says how to read one
 logger's text files: separator, comment prefix, header lines to skip, which column (by its name
 in the header row, or its number from 1) becomes which run column (``t``, ``q1`` ... ``r2`` of
-DESIGN.md section 6) in which unit or with ``value = raw * scale + offset``, and where the metadata
-comes from (fixed values, regular expressions over the header lines, and over a ``README`` beside
-the file). The separator, the comment lines and the header row may be left to the file itself
-(``auto``: :func:`split_table`). A *preset* is a named, built-in mapping (:data:`PRESETS`;
-``mrdlab`` for the MRDLab EndoWrist data set of ``../shared/real/mrdlab``). ``--columns``
-(:func:`columns_mapping`, :func:`read_mapped`) reads a user's own CSV as a run without writing one.
+docs/design.md section 6) in which unit or with ``value = raw * scale + offset``, and where the
+metadata comes from (fixed values, regular expressions over the header lines, and over a
+``README`` beside the file). The separator, the comment lines and the header row may be left to
+the file itself (``auto``: :func:`split_table`). A *preset* is a named, built-in mapping
+(:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data set,
+``sample_data/real/PROVENANCE.md``). ``--columns`` (:func:`columns_mapping`, :func:`read_mapped`)
+reads a user's own CSV as a run without writing one.
 
 What real hardware logs need, learnt from that data set and handled here, not by hand-editing:
 
 - incremental encoders, whose zero is arbitrary: ``zero`` = ``none`` (default) / ``first`` /
   ``mean`` subtracts nothing, the first sample, or the mean of each input and output column. The
   default is ``none`` because the offset between runs of one session is information (the hysteresis
-  shift of DESIGN.md section 3 *is* an offset; on the MRDLab data the flipped jaw angle rises by
+  shift of docs/design.md section 3 *is* an offset; on the MRDLab data the flipped jaw angle rises by
   about 1 deg per 10 % of load torque as the cable stretches: the ``stretch`` effect, driven by
   the ``condition`` metadata the preset sets to the load), and the model absorbs any constant
   zero anyway (its ``offset`` and heights). Use ``mean`` when every file was recorded after a
@@ -31,7 +32,7 @@ What real hardware logs need, learnt from that data set and handled here, not by
   after a zero-phase Butterworth anti-alias low-pass at 0.4 x the new rate when it is lower;
 - drift: the output's drift (deg/s, a least-squares ``y ~ gain*q + b + drift*t``) is reported;
   ``detrend`` removes it. Off by default: slow creep is an effect the diagnosis should see
-  (DESIGN.md section 8), not something to erase silently.
+  (docs/design.md section 8), not something to erase silently.
 
 Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) comes back in an
 :class:`ImportReport` beside the converted :class:`~hystcli.io.Run`.
@@ -58,7 +59,7 @@ from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run
 from .io import _parse_meta_line as _meta_line
 
 TARGETS = KNOWN_COLUMNS
-"""Run columns a mapping may fill (DESIGN.md section 6)."""
+"""Run columns a mapping may fill (docs/design.md section 6)."""
 
 ZERO_MODES = ("none", "first", "mean")
 TIME_REPAIRS = ("error", "drop")
@@ -90,7 +91,7 @@ ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi, "rev": 360.0}
 """Angle units a mapping may name, with the factor to deg (the unit of ``q``, ``y`` and ``r``)."""
 
 CURRENT_UNIT = "mA"
-"""The unit of a run's current columns ``c<k>`` (DESIGN.md section 6)."""
+"""The unit of a run's current columns ``c<k>`` (docs/design.md section 6)."""
 
 CURRENT_UNITS = {"A": 1000.0, "mA": 1.0, "uA": 1e-3}
 """Current units a log may state (metadata ``current_unit``, or a mapping's unit), with the factor to
@@ -519,7 +520,7 @@ MRDLAB = ImportMapping(
         MetaPattern(r"amplitude of ([0-9.]+) degrees", "amplitude_deg"),
         MetaPattern(r"reaction torque of ([0-9.]+) percent", "load_pct"),
         # the load is the run's condition: it drives the condition effects (stretch: the cable
-        # yields to the resistive torque; DESIGN.md section 8), as the shape does for a catheter
+        # yields to the resistive torque; docs/design.md section 8), as the shape does for a catheter
         MetaPattern(r"reaction torque of ([0-9.]+) percent", "condition"),
     ),
     meta_from_readme=(
@@ -1117,8 +1118,8 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     meta.update(_render_meta({str(k): str(v) for k, v in options.meta.items()}, found, source))
     meta.setdefault("source_file", Path(source).name)
 
-    # motor current in mA, the unit of a run (DESIGN.md section 6), from the unit the mapping or
-    # else the log states
+    # motor current in mA, the unit of a run (docs/design.md section 6), from the unit the mapping
+    # or else the log states
     currents = [n for n in cols if n[0] == "c"]
     unstated = [n for n in currents if maps.get(n) is None or maps[n].unit is None]
     unit = meta.get("current_unit", CURRENT_UNIT)
@@ -1136,7 +1137,7 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
         # (4 decimals of A stay 0.1 mA, not 1e-4 mA), then again so x1000 leaves no float dust
         cols[name] = _round(_round(cols[name], options.decimals) * to_ma, options.decimals)
 
-    # the run's column order of DESIGN.md section 6, whatever the mapping's order
+    # the run's column order of docs/design.md section 6, whatever the mapping's order
     ordered = {name: _round(cols[name], options.decimals) for name in TARGETS if name in cols}
     if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
         raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
@@ -1193,8 +1194,8 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     Returns
     -------
     Imported
-        The run (columns in DESIGN.md order, metadata including ``import``: how it was made) and
-        the :class:`ImportReport`.
+        The run (columns in the order of docs/design.md section 6, metadata including
+        ``import``: how it was made) and the :class:`ImportReport`.
 
     Raises
     ------

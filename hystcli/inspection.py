@@ -2,7 +2,7 @@
 
 A model file holds numbers a user wants to see side by side: each knob's parameters with the
 one-sigma uncertainty identification gave them, the edges they imply (the far edges
-``dhat_pos``/``dhat_neg`` of DESIGN.md section 3 and the shifted edges ``d~ = d + offset``),
+``dhat_pos``/``dhat_neg`` of docs/design.md section 3 and the shifted edges ``d~ = d + offset``),
 what identification learnt from the current (the slopes and level ``detect-shift`` uses), the
 effects ``diagnose`` added, the geometry. Two models of one catheter (straight against shifted,
 before against after diagnosis) differ in a few of these: :func:`diff_table` lines them up.
@@ -21,8 +21,8 @@ from .model import PARAM_NAMES, KnobModel, Model
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")
 """Edges a knob's parameters imply (deg): the far edges of the dead zone, the shifted edges."""
 
-_IDENT_FIELDS = ("q_min", "q_max", "rmse", "slope_dead_zone", "slope_loaded", "current_dead_zone",
-                 "eps_lower", "eps_upper")
+_IDENT_FIELDS = ("method", "q_min", "q_max", "rmse", "current_sign", "slope_dead_zone", "slope_loaded",
+                 "current_dead_zone")
 
 
 def _knob_values(knob: KnobModel) -> dict[str, float]:
@@ -30,23 +30,28 @@ def _knob_values(knob: KnobModel) -> dict[str, float]:
 
 
 def parameter_table(model: Model) -> Table:
-    """One row per knob and parameter: value and one-sigma uncertainty (when identified).
+    """One row per knob and parameter: value and the interval identification gave it.
 
-    The eight parameters of DESIGN.md section 3, then the derived edges; the uncertainty is
-    ``-`` where identification fixed the parameter by assumption or the model has none.
+    The eight parameters of the model, then the derived edges; the interval is empty where the
+    model has none (given by hand, derived) and open (``-inf``/``inf``) where the sweep did not fix
+    the parameter on that side.
     """
     rows = []
     for k, knob in model.knobs.items():
         ident = model.identification.get(k)
-        stderr = dict(ident.stderr) if ident is not None else {}
-        unfixed = ident.unfixed if ident is not None else ()
+        est = dict(ident.estimates) if ident is not None else {}
         for name, value in _knob_values(knob).items():
-            note = "derived" if name in DERIVED else "not fixed by the sweep" if name in unfixed else ""
-            rows.append((k, name, value, stderr.get(name), note))
-    return Table(("knob", "parameter", "value", "stderr", "note"),
-                 ("knob", "parameter", "value", "+- (1 sigma)", "note"), tuple(rows),
-                 ("deg (omega: deg of tip per deg of knob); dhat: far edges of the dead zone; "
-                  "shifted_d = d + offset, the edges Algorithm 1 found",))
+            e = est.get(name)
+            note = ("derived" if name in DERIVED else
+                    f"not fixed: {e.reason}" if e is not None and not e.fixed and e.reason else
+                    "not fixed by the sweep" if e is not None and not e.fixed else
+                    "assumed" if e is not None and e.lo == e.hi else "")
+            rows.append((k, name, value, None if e is None else e.lo, None if e is None else e.hi, note))
+    return Table(("knob", "parameter", "value", "lo", "hi", "note"),
+                 ("knob", "parameter", "value", "low", "high", "note"), tuple(rows),
+                 ("deg (omega: deg of tip per deg of knob); low/high: the interval identification gave "
+                  "(95 % profile likelihood; inf: the sweep says nothing that way); dhat: far edges of the "
+                  "dead zone; shifted_d = d + offset, the edges Algorithm 1 found",))
 
 
 def identification_table(model: Model) -> Table | None:
@@ -58,10 +63,10 @@ def identification_table(model: Model) -> Table | None:
     for k, ident in model.identification.items():
         rows.append((k, *(getattr(ident, name) for name in _IDENT_FIELDS)))
     return Table(("knob",) + _IDENT_FIELDS,
-                 ("knob", "q min", "q max", "RMSE", "dC/dq dead zone", "dC/dq loaded", "C dead zone",
-                  "eps_lower", "eps_upper"), tuple(rows),
-                 ("identified range q (deg); RMSE of the tip fit (deg); current slopes per deg and level in "
-                  "the current's unit (mA); eps: detect-shift's default thresholds",))
+                 ("knob", "method", "q min", "q max", "RMSE", "current", "dC/dq dead zone", "dC/dq loaded",
+                  "C dead zone"), tuple(rows),
+                 ("identified range q (deg); RMSE of the tip fit (deg); the current's sign convention, its "
+                  "slopes per deg (load coordinates) and no-load level in the current's unit (mA)",))
 
 
 def effects_table(model: Model) -> Table | None:
@@ -70,7 +75,7 @@ def effects_table(model: Model) -> Table | None:
         return None
     rows = tuple((e.name, p, float(v)) for e in model.effects for p, v in e.params.items())
     return Table(("effect", "parameter", "value"), ("effect", "parameter", "value"), rows,
-                 ("unmodelled effects of DESIGN.md section 8, run by predict and compensate",))
+                 ("unmodelled effects of docs/design.md section 8, run by predict and compensate",))
 
 
 def model_summary(model: Model) -> dict[str, Any]:
@@ -81,7 +86,7 @@ def model_summary(model: Model) -> dict[str, Any]:
         out["knobs"][str(k)] = {
             "params": knob.params(),
             "derived": {name: float(getattr(knob, name)) for name in DERIVED},
-            "stderr": dict(ident.stderr) if ident is not None else {},
+            "intervals": {n: e.to_dict() for n, e in ident.estimates.items()} if ident is not None else {},
             "unfixed": list(ident.unfixed) if ident is not None else [],
             "identification": (None if ident is None else
                                {name: getattr(ident, name) for name in _IDENT_FIELDS}),
@@ -130,7 +135,7 @@ def envelope_figure(model: Model, fmt: str = "png", q_range: Sequence[float] | N
     """Each knob's two envelopes against the knob angle, shifted by its offset, as file bytes.
 
     The ascending envelope ``f_up`` (loading: lines L2-L4) and the descending ``f_dn``
-    (unloading: L8-L6) of DESIGN.md section 3, with the shifted dead-zone edges and the far edges
+    (unloading: L8-L6) of docs/design.md section 3, with the shifted dead-zone edges and the far edges
     marked; between them lies every state the knob can hold. Drawn with matplotlib's ``Figure``
     API (no global backend switch).
 

@@ -1,6 +1,6 @@
 """Run CSV files and model JSON files: read, validate at the boundary, write atomically.
 
-Formats are DESIGN.md section 6. A run CSV is optional ``# key: value`` metadata lines, a header
+Formats are docs/design.md section 6. A run CSV is optional ``# key: value`` metadata lines, a header
 row and numeric rows; a model JSON is ``{"format": "hyst-model", "version": 1, "knobs": ...}``.
 Every reader raises :class:`~hystcli.errors.DataError` or :class:`~hystcli.errors.ModelError`
 with a message that names the file and the problem; every writer writes a temporary file beside
@@ -24,7 +24,8 @@ from typing import Callable, Iterable, Iterator, Mapping
 import numpy as np
 
 from .errors import DataError, HystError, ModelError
-from .model import (PARAM_NAMES, UNFIXABLE, EffectSpec, Geometry, KnobIdentification, KnobModel, Model)
+from .estimate import Estimate
+from .model import PARAM_NAMES, EffectSpec, Geometry, KnobIdentification, KnobModel, Model
 
 MODEL_FORMAT = "hyst-model"
 MODEL_VERSION = 1
@@ -572,17 +573,7 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
         if key not in ("1", "2") or not isinstance(d, dict):
             raise ModelError(f"{source}: bad \"identification\" entry {key!r}")
         try:
-            ident[int(key)] = KnobIdentification(
-                slope_dead_zone=_num(d["slope_dead_zone"], "identification slope_dead_zone"),
-                slope_loaded=_num(d["slope_loaded"], "identification slope_loaded"),
-                q_min=_num(d["q_min"], "identification q_min"),
-                q_max=_num(d["q_max"], "identification q_max"),
-                rmse=None if d.get("rmse") is None else _num(d["rmse"], "identification rmse"),
-                stderr={k: _num(v, f"identification stderr {k}") for k, v in (d.get("stderr") or {}).items()},
-                **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
-                   for name in KnobIdentification.OPTIONAL},
-                unfixed=_unfixed_names(d.get("unfixed"), source),
-            )
+            ident[int(key)] = _identification_of(d, source, key)
         except KeyError as exc:
             raise ModelError(f"{source}: identification of knob {key} is missing {exc.args[0]}") from None
         except ModelError as exc:
@@ -592,16 +583,32 @@ def model_from_dict(data: object, source: str = "<model>") -> Model:
     return Model(knobs, geometry, tuple(effects), meta, ident)
 
 
-def _unfixed_names(value: object, source: str) -> tuple[str, ...]:
-    if value is None:
-        return ()
-    if not isinstance(value, list) or any(v not in UNFIXABLE for v in value):
-        raise ModelError(f"{source}: identification \"unfixed\" must be a list of {' / '.join(UNFIXABLE)}")
-    return tuple(value)
+def _identification_of(d: dict, source: str, key: str) -> KnobIdentification:
+    """A knob's identification from its model-file entry."""
+    where = f"{source}: knob {key} identification"
+
+    def estimates(value: object, what: str) -> dict:
+        if value is None:
+            return {}
+        if not isinstance(value, dict) or not all(isinstance(v, dict) for v in value.values()):
+            raise ModelError(f"{where}: \"{what}\" must map names to intervals")
+        return {str(n): Estimate.from_dict(v, f"{where} {what} {n}") for n, v in value.items()}
+
+    sign = d.get("current_sign")
+    return KnobIdentification(
+        q_min=_num(d["q_min"], "identification q_min"), q_max=_num(d["q_max"], "identification q_max"),
+        method=str(d.get("method", "tip")),
+        rmse=None if d.get("rmse") is None else _num(d["rmse"], "identification rmse"),
+        estimates=estimates(d.get("estimates"), "estimates"),
+        current_sign=None if sign is None else str(sign),
+        current_edges=estimates(d.get("current_edges"), "current_edges"),
+        slope_dead_zone=_num(d.get("slope_dead_zone", 0.0), "identification slope_dead_zone"),
+        **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
+           for name in KnobIdentification.OPTIONAL})
 
 
 def model_to_dict(model: Model) -> dict:
-    """The JSON-ready dict of a model (DESIGN.md section 6)."""
+    """The JSON-ready dict of a model (docs/design.md section 6)."""
     out: dict = {"format": MODEL_FORMAT, "version": MODEL_VERSION,
                  "knobs": {str(k): v.params() for k, v in model.knobs.items()}}
     if model.geometry is not None:
@@ -613,13 +620,18 @@ def model_to_dict(model: Model) -> dict:
     if model.meta:
         out["meta"] = dict(model.meta)
     if model.identification:
-        out["identification"] = {
-            str(k): {"slope_dead_zone": v.slope_dead_zone, "slope_loaded": v.slope_loaded,
-                     "q_min": v.q_min, "q_max": v.q_max, "rmse": v.rmse, "stderr": dict(v.stderr),
-                     **{name: getattr(v, name) for name in KnobIdentification.OPTIONAL
-                        if name == "current_dead_zone" or getattr(v, name) is not None},
-                     **({"unfixed": list(v.unfixed)} if v.unfixed else {})}
-            for k, v in model.identification.items()}
+        out["identification"] = {str(k): _identification_dict(v) for k, v in model.identification.items()}
+    return out
+
+
+def _identification_dict(v: KnobIdentification) -> dict:
+    out: dict = {"q_min": v.q_min, "q_max": v.q_max, "method": v.method, "rmse": v.rmse,
+                 "estimates": {n: e.to_dict() for n, e in v.estimates.items()}}
+    if v.current_sign is not None:
+        out["current_sign"] = v.current_sign
+        out["current_edges"] = {n: e.to_dict() for n, e in v.current_edges.items()}
+        out["slope_dead_zone"] = v.slope_dead_zone
+    out.update({name: getattr(v, name) for name in KnobIdentification.OPTIONAL if getattr(v, name) is not None})
     return out
 
 

@@ -1,6 +1,6 @@
 """The dead-zone + backlash hysteresis model of one knob and of a two-knob catheter.
 
-This module owns the equations of the paper's section II (Kim & Mansi) as fixed by DESIGN.md
+This module owns the equations of the paper's section II (Kim & Mansi) as fixed by docs/design.md
 section 3: the two envelopes, the forward clamp recursion, its exact inverse (compensation), the
 shift of the model by an ``offset``, the shift a known shaft shape causes (paper eqs. 1-4) and the
 update of both knobs' offsets for a bulk rotation of the catheter body.
@@ -28,12 +28,10 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from .errors import ModelError
+from .estimate import Estimate
 
 PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
-"""The parameters of one knob in file order (DESIGN.md section 6)."""
-
-UNFIXABLE = ("d_pos", "d_neg", "b_pos", "b_neg")
-"""Parameters an identification may leave unfixed (:attr:`KnobIdentification.unfixed`)."""
+"""The parameters of one knob in file order (docs/design.md section 6)."""
 
 PAPER_OMEGA = 1.45
 """The paper's average slope omega (section III: "We used omega as 1.45 as the average value")."""
@@ -143,7 +141,7 @@ class KnobModel:
     ------
     ModelError
         When a parameter is not finite or the parameters violate a validity condition of
-        DESIGN.md section 3 (the message names the condition).
+        docs/design.md section 3 (the message names the condition).
     """
 
     d_pos: float
@@ -465,7 +463,7 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 
     Rotating the body by :math:`\\delta` turns every segment's :math:`\\theta_i` into
     :math:`\\theta_i - \\delta` in the handle's frame, which rotates the vector
-    :math:`(offset_1, offset_2)` of eqs. 3-4 by :math:`-\\delta` (DESIGN.md section 3; the paper
+    :math:`(offset_1, offset_2)` of eqs. 3-4 by :math:`-\\delta` (docs/design.md section 3; the paper
     leaves this case out).
     """
     c, s = math.cos(math.radians(delta_deg)), math.sin(math.radians(delta_deg))
@@ -477,7 +475,7 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EffectSpec:
-    """An unmodelled effect attached to a model (DESIGN.md section 8): its name, parameters and
+    """An unmodelled effect attached to a model (docs/design.md section 8): its name, parameters and
     form ("" for the effect's default form, which is what a version 1 entry without one means)."""
 
     name: str
@@ -492,91 +490,74 @@ class EffectSpec:
 class KnobIdentification:
     """What ``hyst identify`` learnt about one knob beyond its eight parameters.
 
-    Stored in the model file so that ``detect-shift`` can run with no thresholds given.
+    Stored in the model file so that ``detect-shift`` runs with nothing given, and so that every
+    command knows what the record fixed.
 
     Attributes
     ----------
-    slope_dead_zone : float
-        Typical ``|dC/dq|`` inside the dead zone (current unit per deg).
-    slope_loaded : float
-        Typical ``dC/dq`` once the tendon is taut (current unit per deg).
     q_min, q_max : float
         Knob range the model was identified on (deg).
+    method : str
+        ``"tip"``, ``"current"`` or ``"given"`` (a model read against a record it did not come from).
     rmse : float or None
-        RMSE of the fitted model against the measured tip angle (deg), when ``y`` was present.
-    stderr : mapping
-        One-sigma uncertainty of each identified parameter (deg or deg/deg).
-    current_dead_zone : float or None
-        Typical motor current inside the dead zone (no tendon taut), so a search that starts
-        with a tendon already taut can tell which one from the current level.
-    current_noise : float or None
-        Sample-to-sample noise of the (conditioned) current on the sweep (current unit).
+        RMSE of the model against the measured tip angle (deg), when the sweep had one.
+    estimates : mapping of str to Estimate
+        The seven parameters with their intervals; ``fixed`` False for what the sweep did not fix.
+    current_sign : str or None
+        How the drive reports its current: ``"signed"`` or ``"magnitude"`` (None: no current).
+    current_edges : mapping of str to Estimate
+        ``"pos"``/``"neg"``: where the sweep's current takes each tendon up from slack (deg), with
+        its interval: what Algorithm 1 measures an offset from.
     no_load_rising, no_load_falling : float or None
-        No-load current while the knob turns positive / negative: the motor's own Coulomb
-        friction moves the level with the direction of motion.
-    current_edge_pos, current_edge_neg : float or None
-        Where the sweep's current showed a tendon taken up (deg of knob): the loading edges read
-        the way Algorithm 1 reads them, beside the tip's ``d_pos``/``d_neg``.
-    current_edge_pos_se, current_edge_neg_se : float or None
-        Their standard errors (deg), kept by a tip fit where the current's reading claims the edge
-        (not one only the record's first stretch showed). Where the tip fit cannot place an edge,
-        Algorithm 1 measures the offset from the current's, as the paper's identification (the
-        current's) would. A current-only identification keeps none: its edges are the current's.
-    current_arrive_rising, current_arrive_falling : float or None
-        Where, on the sweep's branches after a reversal, the unloading tendon's current arrived at
-        the dead zone (deg): rising, the negative tendon; falling, the positive one. Kept as a
-        record of the sweep; Algorithm 1 no longer compares a search's arrival with them (where
-        an unloading current meets the dead zone depends on the current law, and on design
-        replays of the plant zoo every disagreement was the arrival's, not the loading edge's).
-    unfixed : tuple of str
-        Parameters the sweep could not fix (:data:`UNFIXABLE`). A dead-zone edge
-        (``"d_pos"``, ``"d_neg"``): Algorithm 1 must not take an offset from it. A backlash
-        (``"b_pos"``, ``"b_neg"``, a current-only identification whose current unloads at once
-        after a reversal): the knob model keeps 0 deg for it, so the model cannot predict or
-        compensate the tip (:meth:`Model.require_loop`), while Algorithm 1 reads the edges.
+        The current in the dead zone while the knob turns positive / negative (the motor's own
+        friction moves it with the direction).
+    slope_dead_zone : float
+        The current's slope in the dead zone, in load coordinates (current unit per deg).
+    slope_loaded_pos, slope_loaded_neg : float or None
+        Its slope just past each take-up, in load coordinates.
+    edge_level_pos, edge_level_neg : float or None
+        The current where each tendon is taken up, moving toward it (a bend moves the take-up along
+        the knob, not this level): how Algorithm 1 tells a take-up from a held load.
+    current_noise : float or None
+        Per-sample noise of the conditioned current.
     cogging_period, cogging_sin, cogging_cos : float or None
-        The motor's cogging ripple read on the sweep's dead zone
-        (:func:`hystcli.current.cogging_ripple`): period (deg of knob) and the amplitudes (mA) of
-        ``sin(2 pi q / period)`` and ``cos(...)``; Algorithm 1 takes it out of every reading.
-        None where the sweep showed none.
+        The motor's cogging ripple (period, deg; amplitudes), None where the sweep showed none.
     """
 
-    slope_dead_zone: float
-    slope_loaded: float
     q_min: float
     q_max: float
+    method: str = "tip"
     rmse: float | None = None
-    stderr: Mapping[str, float] = field(default_factory=dict)
-    current_dead_zone: float | None = None
-    current_noise: float | None = None
+    estimates: Mapping[str, "Estimate"] = field(default_factory=dict)
+    current_sign: str | None = None
+    current_edges: Mapping[str, "Estimate"] = field(default_factory=dict)
     no_load_rising: float | None = None
     no_load_falling: float | None = None
-    current_edge_pos: float | None = None
-    current_edge_neg: float | None = None
-    current_edge_pos_se: float | None = None
-    current_edge_neg_se: float | None = None
-    current_arrive_rising: float | None = None
-    current_arrive_falling: float | None = None
-    unfixed: tuple[str, ...] = ()
+    slope_dead_zone: float = 0.0
+    slope_loaded_pos: float | None = None
+    slope_loaded_neg: float | None = None
+    edge_level_pos: float | None = None
+    edge_level_neg: float | None = None
+    current_noise: float | None = None
     cogging_period: float | None = None
     cogging_sin: float | None = None
     cogging_cos: float | None = None
 
+    OPTIONAL = ("no_load_rising", "no_load_falling", "slope_loaded_pos", "slope_loaded_neg", "edge_level_pos",
+                "edge_level_neg", "current_noise",
+                "cogging_period", "cogging_sin", "cogging_cos")
+    """Numeric fields a model file may leave out."""
+
     def __post_init__(self) -> None:
-        object.__setattr__(self, "stderr", MappingProxyType(dict(self.stderr)))
-        object.__setattr__(self, "unfixed", tuple(str(u) for u in self.unfixed))
-        bad = [u for u in self.unfixed if u not in UNFIXABLE]
+        object.__setattr__(self, "estimates", MappingProxyType(dict(self.estimates)))
+        object.__setattr__(self, "current_edges", MappingProxyType(dict(self.current_edges)))
+        if self.current_sign not in (None, "signed", "magnitude"):
+            raise ModelError(f"identification: current_sign must be signed or magnitude, got {self.current_sign!r}")
+        bad = [k for k in self.current_edges if k not in ("pos", "neg")]
         if bad:
-            raise ModelError(f"identification: unfixed names {', '.join(bad)}; only {', '.join(UNFIXABLE)} "
-                             "can be left unfixed")
-        for name in ("current_edge_pos_se", "current_edge_neg_se"):
-            v = getattr(self, name)
-            if v is not None and not (math.isfinite(v) and v >= 0):
-                raise ModelError(f"identification: {name} must be a non-negative number of deg, got {v!r}")
+            raise ModelError(f"identification: current_edges keys must be pos/neg, got {', '.join(bad)}")
         cog = (self.cogging_period, self.cogging_sin, self.cogging_cos)
         if any(v is not None for v in cog):
-            # the search takes the ripple out of every reading: half a ripple, or a period that
-            # is no period, would put a wrong or non-finite current in front of it
             if any(v is None for v in cog):
                 raise ModelError("identification: cogging_period, cogging_sin and cogging_cos go together "
                                  "(a model file gives all three or none)")
@@ -586,33 +567,36 @@ class KnobIdentification:
             if not (math.isfinite(self.cogging_sin) and math.isfinite(self.cogging_cos)):
                 raise ModelError("identification: cogging_sin and cogging_cos must be finite")
 
-    OPTIONAL = ("current_dead_zone", "current_noise", "no_load_rising", "no_load_falling",
-                "current_edge_pos", "current_edge_neg", "current_edge_pos_se", "current_edge_neg_se",
-                "current_arrive_rising", "current_arrive_falling",
-                "cogging_period", "cogging_sin", "cogging_cos")
-    """Fields a model file may leave out (older files have none of them but the first)."""
+    @property
+    def unfixed(self) -> tuple[str, ...]:
+        """Parameters the sweep did not fix."""
+        return tuple(n for n, e in self.estimates.items() if not e.fixed)
 
     @property
-    def ripple(self):  # noqa: ANN201 - hystcli.current.Ripple or None
-        """The cogging ripple as a :class:`hystcli.current.Ripple`, None when the sweep showed none
-        (the three fields come together: :meth:`__post_init__`)."""
+    def stderr(self) -> dict[str, float]:
+        """One-sigma uncertainties of the fixed parameters (from their intervals)."""
+        return {n: e.stderr for n, e in self.estimates.items() if e.fixed and math.isfinite(e.stderr)}
+
+    @property
+    def ripple(self):  # noqa: ANN201 - hystcli.signal.condition.Ripple or None
+        """The cogging ripple, None when the sweep showed none."""
         if self.cogging_period is None:
             return None
-        from .current import Ripple
+        from .signal.condition import Ripple
 
         return Ripple(self.cogging_period, self.cogging_sin, self.cogging_cos)
 
     @property
-    def eps_lower(self) -> float:
-        """Default :math:`\\epsilon_{lower}` of Algorithm 1: halfway (geometric) between the levels."""
-        lo = max(self.slope_dead_zone, 1e-12)
-        hi = max(self.slope_loaded, lo)
-        return math.sqrt(lo * hi) if hi > 4 * lo else 0.5 * (lo + hi)
+    def slope_loaded(self) -> float:
+        """The tendons' loaded slope (the smaller side's; 0 when neither was read)."""
+        v = [s for s in (self.slope_loaded_pos, self.slope_loaded_neg) if s is not None]
+        return min(v) if v else 0.0
 
     @property
-    def eps_upper(self) -> float:
-        """Default :math:`\\epsilon_{upper}` of Algorithm 1 (contact): 5 times the loaded slope."""
-        return 5.0 * self.slope_loaded
+    def current_dead_zone(self) -> float | None:
+        """The current with no tendon taut: the mean of the two directions' levels."""
+        v = [s for s in (self.no_load_rising, self.no_load_falling) if s is not None]
+        return sum(v) / len(v) if v else None
 
 
 @dataclass(frozen=True)
@@ -653,15 +637,10 @@ class Model:
         object.__setattr__(self, "identification", MappingProxyType(dict(self.identification)))
 
     def require_loop(self, knobs: Sequence[int], what: str) -> None:
-        """Refuse to predict or compensate with a knob whose backlash its identification left
-        unfixed (a current-only sweep whose current unloads at once after each reversal).
-
-        Parameters
-        ----------
-        knobs : sequence of int
-            The knobs about to be used.
-        what : str
-            What the caller does, for the message (``"predict the tip"``).
+        """Refuse to predict or compensate with a knob whose backlash is a placeholder: a
+        current-only identification whose current did not show it (the model keeps 0 deg there,
+        which predicts nothing). A tip identification's unfixed backlash predicts its record as
+        well as the best fit and is used.
 
         Raises
         ------
@@ -670,15 +649,15 @@ class Model:
         """
         for k in knobs:
             ident = self.identification.get(int(k))
-            unfixed = [u for u in ("b_pos", "b_neg") if ident is not None and u in ident.unfixed]
+            if ident is None or ident.method != "current":
+                continue
+            unfixed = [u for u in ("b_pos", "b_neg") if u in ident.unfixed]
             if unfixed:
                 raise ModelError(
                     f"cannot {what} with this model: knob {k}'s {' and '.join(unfixed)} "
                     f"{'were' if len(unfixed) > 1 else 'was'} not fixed by its sweep (the motor current "
-                    "unloads at once after a reversal, so it does not show the backlash), and the model keeps "
-                    f"0 deg in {'their' if len(unfixed) > 1 else 'its'} place; identify knob {k} with the tip "
-                    "angle measured. detect-shift can "
-                    "still use this model")
+                    "does not show the backlash), and the model keeps 0 deg in its place; identify knob "
+                    f"{k} with the tip angle measured. detect-shift can still use this model")
 
     def knob(self, k: int) -> KnobModel:
         """The model of knob ``k`` (1 or 2)."""
@@ -737,7 +716,7 @@ class Model:
         return compensate(self, reference, ignore_shift=ignore_shift)
 
     def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
-        """Which offset each knob uses for a run with metadata ``meta`` (DESIGN.md section 6).
+        """Which offset each knob uses for a run with metadata ``meta`` (docs/design.md section 6).
 
         The run's ``offsetK`` when present, else the shift the model's geometry gives for the
         run's ``shape``, else the model's own offset.

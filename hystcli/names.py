@@ -7,7 +7,7 @@ modules take them from here: one declaration, no import cost for the help.
 from __future__ import annotations
 
 MOTIONS = ("sweep", "periodic", "nonperiodic")
-"""Motions the virtual catheter generates (DESIGN.md section 7): the identification sweep, the
+"""Motions the virtual catheter generates (docs/design.md section 7): the identification sweep, the
 paper's periodic input, its non-periodic input."""
 
 __all__ = ["MOTIONS"]

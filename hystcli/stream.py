@@ -1,9 +1,9 @@
 """Streaming compensation: the model's inverse chain one reference sample at a time, for a
-robot's own control loop (DESIGN.md section 9, ``hystcli.Compensator``).
+robot's own control loop (docs/design.md section 9, ``hystcli.Compensator``).
 
 :class:`Compensator` runs the same chain as ``hyst compensate`` (:func:`hystcli.effects.inverse`):
 the inverse stages of the model's effects from the sensor back to the input, with the hysteresis
-inverse of DESIGN.md section 3 in the middle, each stage keeping its own state between samples
+inverse of docs/design.md section 3 in the middle, each stage keeping its own state between samples
 (:meth:`hystcli.effects.EffectType.stepper`). Fed the samples of a reference file one by one it
 returns the commands ``hyst compensate`` writes for that file (to float rounding: ``exp`` and
 ``atanh`` may differ from the compiled kernels' by an ulp).
@@ -56,7 +56,7 @@ LATENCY_MODES = ("delay", "ignore")
 
 
 class _Hysteresis:
-    """The hysteresis inverse of DESIGN.md section 3, one sample at a time (``_inverse_py`` and
+    """The hysteresis inverse of docs/design.md section 3, one sample at a time (``_inverse_py`` and
     ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
 
     __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
@@ -176,7 +176,7 @@ class _Hysteresis:
 
 
 class _Bend:
-    """The forward hysteresis of DESIGN.md section 3 one sample at a time (``_forward_py``: the
+    """The forward hysteresis of docs/design.md section 3 one sample at a time (``_forward_py``: the
     same operations): a knob's bend as its base model predicts it, what the other knob's
     magnitude coupling reads (:mod:`hystcli.effects.coupling`)."""
 
@@ -376,7 +376,7 @@ class Compensator:
     shape : Shape or str, optional
         The shaft's shape, the condition of ``friction``/``deadzone`` (default: straight).
     condition : float, optional
-        A stated load in place of the shape's curvature (``stretch``; DESIGN.md section 6).
+        A stated load in place of the shape's curvature (``stretch``; docs/design.md section 6).
     latency : {"delay", "ignore"}
         With a ``latency`` effect: return exact commands ``lookahead`` samples late, or leave the
         tracker's delay uncompensated (module notes).
@@ -506,7 +506,7 @@ class Compensator:
     def for_run(cls, model: Model, meta: Mapping[str, str], knobs: Sequence[int] | None = None,
                 offsets: Mapping[int, float] | None = None, **kwargs: Any) -> "Compensator":
         """The compensator ``hyst compensate`` would use for a reference with metadata ``meta``:
-        each knob's offset by DESIGN.md section 6's rule (:meth:`Model.offsets_for`) unless
+        each knob's offset by docs/design.md section 6's rule (:meth:`Model.offsets_for`) unless
         ``offsets`` are given, the shape and the stated condition from ``meta``."""
         offs = model.offsets_for(meta) if offsets is None else dict(offsets)
         return cls(model.with_offsets(offs), knobs, shape=Shape.parse(meta.get("shape")),
@@ -568,7 +568,7 @@ class Compensator:
 
     def rotate(self, delta_deg: float) -> None:
         """A bulk rotation of the catheter body by ``delta_deg`` (deg) between two steps: rotates
-        the offsets' vector by ``-delta_deg`` (``Model.rotated``, DESIGN.md section 3)."""
+        the offsets' vector by ``-delta_deg`` (``Model.rotated``, docs/design.md section 3)."""
         delta = float(delta_deg)
         if not math.isfinite(delta):
             raise ModelError(f"rotation must be finite, got {delta_deg!r}")

@@ -5,7 +5,7 @@ The reference (a run CSV with ``t`` and ``r1``/``r2``: a file, or lines on stdin
 goes sample by sample through a :class:`hystcli.stream.Compensator`, and each command goes to the
 robot as a ``MOVE`` at the reference's own timing (sample ``i`` at ``t[i] - t[0]`` after the
 start). What the robot answers (motor current, the tracker's tip angle) is logged beside the
-reference and the commands: the log is a run CSV (DESIGN.md section 6) that ``hyst evaluate``
+reference and the commands: the log is a run CSV (docs/design.md section 6) that ``hyst evaluate``
 reads as it is.
 
 Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and
@@ -194,7 +194,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     device : hystcli.device.Device
         An open device (handshake done).
     model : Model
-        The catheter's model (with its effects). Each knob's offset is DESIGN.md section 6's rule
+        The catheter's model (with its effects). Each knob's offset is docs/design.md section 6's rule
         for the reference's metadata, or the detected one with ``detect_shift_first``.
     reference : Reference
         :func:`reference_from_run` (a file: checked whole first) or :func:`reference_from_lines`.

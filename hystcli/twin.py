@@ -1,25 +1,32 @@
 """The virtual catheter: a seeded simulator of the physical system the paper measured.
 
 It owns the true parameters of named virtual catheters, the motions of the paper's protocol
-(sweep, periodic, non-periodic), the motor-current model of DESIGN.md section 4, the sensor chain
+(sweep, periodic, non-periodic), the motor-current model of docs/design.md section 4, the sensor chain
 (EM-tracker noise, 20 Hz Butterworth) and two ways to run it: :func:`simulate` (a whole run at
 once; the demo, the tests, the sample data, ``hyst simulate`` through :func:`simulate_motion`)
 and :class:`LiveTwin` (move by move, for the serial emulator), which carry the same states and
 so give the same samples. The tip angle comes from :mod:`hystcli.effects` (the base model of
-DESIGN.md section 3 plus the unmodelled effects of section 8); this module adds the current.
+docs/design.md section 3 plus the unmodelled effects of section 8); this module adds the current.
 
 Motor current (signed, mA), for the tendon input ``u`` (the knob angle seen through the coupling
 and rate effects) relative to the shifted edges::
 
-    T      = k_load * ((u - d~_pos)+ - (d~_neg - u)+)      tendon tension: 0 while both are slack
-    phi    = play operator on u of width b (in [-1, 1])     +1 while pulling the anterior tendon
+    L_pos, L_neg = the taut tendon's load (deg of knob), from the knob's own hysteresis state y:
+                   pulling the tip up past its rising plateau,   L_pos = (y - h_pos) / omega;
+                   holding it after a reversal (the tip rests on its backlash plateau, the sheath
+                   friction holds the tendon), L_pos stays where it was;
+                   letting it down, L_pos falls linearly in y to 0 where the tip settles on its
+                   falling plateau h_neg (the negative tendon mirrored)
+    T      = k_load * (L_pos - L_neg)                        tendon tension
+    phi    = the sheath friction's sign, flipping over ``flip`` deg of knob after a reversal
     c      = c_no_load + c_coulomb * tanh(dq/dt / v_s) + T + mu * |T| * phi + contact + noise
 
-So the current is flat in the dead zone (no tendon taut), rises with slope ``k_load (1 +- mu)``
-once a tendon is taut, and after a reversal falls steeply by ``2 mu |T|`` over the backlash width
-``b`` while the sheath friction changes sign (the current's signature of backlash). Contact with
-a wall adds ``stiffness`` mA per degree of knob past it (the ``contact`` effect). The motor
-velocity ``dq/dt`` is a backward difference, so the live twin can compute it causally.
+So the current is flat in the dead zone (no tendon taut), rises with slope ``k_load (1 + mu)``
+once a tendon is taut, and after a reversal drops by ``2 mu |T|`` at once (the sheath friction
+changes sign), stays level while the knob crosses the backlash and the tip rests on its plateau,
+then unloads as the tip comes down (the current's signature of the backlash). Contact with a wall
+adds ``stiffness`` mA per degree of knob past it (the ``contact`` effect). The motor velocity
+``dq/dt`` is a backward difference, so the live twin can compute it causally.
 """
 from __future__ import annotations
 
@@ -56,7 +63,10 @@ class CurrentParams:
     k_load : float
         Current per degree of knob past the slack edge (mA/deg).
     mu : float
-        Sheath friction ratio: the loading slope is ``k_load (1 + mu)``, unloading ``k_load (1 - mu)``.
+        Sheath friction ratio: the loading slope is ``k_load (1 + mu)``; at a reversal the current
+        drops by ``2 mu |T|``.
+    flip : float
+        Knob travel (deg) over which the sheath friction changes sign after a reversal.
     noise : float
         White current noise before the 20 Hz filter (mA rms).
     """
@@ -66,6 +76,7 @@ class CurrentParams:
     v_smooth: float = 0.5
     k_load: float = 4.0
     mu: float = 0.25
+    flip: float = 0.5
     noise: float = 3.0
 
 
@@ -110,7 +121,7 @@ class VirtualCatheter:
                      meta={"catheter": self.name})
 
 
-# Two plain virtual catheters with DESIGN.md section 6's example knob (and one like it): fixed
+# Two plain virtual catheters with docs/design.md section 6's example knob (and one like it): fixed
 # reference plants for tests and benches, with no effects by default; beta_catheter / beta_knob
 # from a 10 Fr shaft (tendons ~1.2 mm off axis) and an 8 mm knob pulley. The catheters users
 # simulate and the sample data was recorded on, ice-a and ice-b, are the calibrated ones of
@@ -141,7 +152,7 @@ def get_catheter(name: str) -> VirtualCatheter:
 
 
 # --------------------------------------------------------------------------------------------
-# motions of the paper's protocol (DESIGN.md section 7)
+# motions of the paper's protocol (docs/design.md section 7)
 # --------------------------------------------------------------------------------------------
 def time_axis(duration: float, fs: float) -> np.ndarray:
     """Sample times ``0, 1/fs, ...`` covering ``duration`` seconds."""
@@ -186,12 +197,12 @@ def nonperiodic(amplitude: float = 30.0, freq: float = 0.02, duration: float = 1
 # --------------------------------------------------------------------------------------------
 @njit(cache=True)
 def _play(u, width, phi0, prev0, out):
-    # play (backlash) operator normalised to [-1, 1]: moves 2/width per degree of knob travel
+    # play operator normalised to [-1, 1]: moves 2/width per degree of knob travel
     phi = phi0
     prev = prev0
     for i in range(u.shape[0]):
-        if width[i] > 0:
-            phi += 2.0 * (u[i] - prev) / width[i]
+        if width > 0:
+            phi += 2.0 * (u[i] - prev) / width
             if phi > 1.0:
                 phi = 1.0
             elif phi < -1.0:
@@ -207,6 +218,36 @@ def _play(u, width, phi0, prev0, out):
     return phi
 
 
+@njit(cache=True)
+def _loads(u, d_pos, d_neg, b_pos, b_neg, omega, h_pos, h_neg, st, out):
+    # the tip's clamp recursion (the knob's own hysteresis state) and each tendon's load (deg of
+    # stretch): taken up past its edge while the knob pulls it, held after a reversal while the
+    # tip rests, let down linearly in the tip angle to 0 where the tip settles on its plateau.
+    # st = (y, u_prev, L_pos, L_neg, L_pos at its reversal, y there, L_neg at its reversal, y there)
+    dhat_pos = (h_pos - h_neg) / omega + d_neg + b_neg
+    dhat_neg = (h_neg - h_pos) / omega + d_pos - b_pos
+    y, prev, lp, ln, lp0, yp0, ln0, yn0 = st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7]
+    for i in range(u.shape[0]):
+        x = u[i]
+        up = h_pos + omega * (min(x - dhat_pos, 0.0) + max(x - d_pos, 0.0))
+        dn = h_neg + omega * (min(x - d_neg, 0.0) + max(x - dhat_neg, 0.0))
+        y_new = min(max(y, up), dn)
+        if x > prev:
+            lp = max(lp, x - d_pos)
+            lp0, yp0 = lp, y_new
+            if ln > 0.0 and y_new > y:
+                ln = ln0 * max(h_pos - y_new, 0.0) / max(h_pos - yn0, 1e-12)
+        elif x < prev:
+            ln = max(ln, d_neg - x)
+            ln0, yn0 = ln, y_new
+            if lp > 0.0 and y_new < y:
+                lp = lp0 * max(y_new - h_neg, 0.0) / max(yp0 - h_neg, 1e-12)
+        y = y_new
+        prev = x
+        out[i] = lp - ln
+    st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7] = y, prev, lp, ln, lp0, yp0, ln0, yn0
+
+
 @dataclass
 class CurrentState:
     """What the motor-current model of one knob carries between calls (the live twin).
@@ -214,7 +255,9 @@ class CurrentState:
     Attributes
     ----------
     phi : float
-        Friction play state in [-1, 1].
+        Sheath friction's sign state in [-1, 1].
+    loads : numpy.ndarray or None
+        The hysteresis state behind the tendons' loads (tip, loads, peaks); None: fresh.
     u_prev : float
         Last knob input relative to the shift (deg).
     q_prev, t_prev : float
@@ -222,6 +265,7 @@ class CurrentState:
     """
 
     phi: float = 0.0
+    loads: np.ndarray | None = None
     u_prev: float | None = None
     q_prev: float | None = None
     t_prev: float | None = None
@@ -242,7 +286,7 @@ def motor_current(knob: KnobModel, cur: CurrentParams, q: np.ndarray, t: np.ndar
     t : numpy.ndarray
         Sample times, s.
     phi0 : float
-        Initial friction play state (when ``state`` is not given).
+        Initial friction state (when ``state`` is not given).
     x : numpy.ndarray, optional
         The input the tendons see, when effects make it differ from ``q`` (coupling, rate).
     state : CurrentState, optional
@@ -251,20 +295,22 @@ def motor_current(knob: KnobModel, cur: CurrentParams, q: np.ndarray, t: np.ndar
     Notes
     -----
     The velocity is the backward difference ``(q_i - q_{i-1}) / (t_i - t_{i-1})`` (causal, so
-    the live twin can compute it), the first sample of a run taking the second's.
+    the live twin can compute it), the first sample of a run taking the second's. A fresh state
+    starts the tip at rest on the straight shaft (y = 0 clamped into the loop), no tendon loaded.
     """
     q = np.asarray(q, float)
-    u = (q if x is None else np.asarray(x, float)) - knob.offset
-    tension = cur.k_load * (np.maximum(u - knob.d_pos, 0.0) - np.maximum(knob.d_neg - u, 0.0))
-    # the friction play uses the backlash width of the side whose tendon is taut
-    width = np.where(u >= 0.5 * (knob.d_pos + knob.d_neg), knob.b_pos, knob.b_neg)
+    u = np.ascontiguousarray((q if x is None else np.asarray(x, float)) - knob.offset)
+    load = np.empty_like(u)
     phi = np.empty_like(u)
     v = np.zeros_like(q)
     t = np.asarray(t, float)
     if u.size:
         fresh = state is None or state.u_prev is None
+        st = (np.array([0.0, u[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0]) if fresh or state.loads is None
+              else state.loads.copy())
+        _loads(u, knob.d_pos, knob.d_neg, knob.b_pos, knob.b_neg, knob.omega, knob.h_pos, knob.h_neg, st, load)
         phi_start = phi0 if state is None else state.phi
-        phi_end = _play(u, width, phi_start, u[0] if fresh else state.u_prev, phi)
+        phi_end = _play(u, cur.flip, phi_start, u[0] if fresh else state.u_prev, phi)
         if q.size > 1:
             v[1:] = np.diff(q) / np.diff(t)
         if fresh:
@@ -272,8 +318,9 @@ def motor_current(knob: KnobModel, cur: CurrentParams, q: np.ndarray, t: np.ndar
         else:
             v[0] = (q[0] - state.q_prev) / (t[0] - state.t_prev)
         if state is not None:
-            state.phi, state.u_prev = float(phi_end), float(u[-1])
+            state.phi, state.u_prev, state.loads = float(phi_end), float(u[-1]), st
             state.q_prev, state.t_prev = float(q[-1]), float(t[-1])
+    tension = cur.k_load * load
     return cur.no_load + cur.coulomb * np.tanh(v / cur.v_smooth) + tension + cur.mu * np.abs(tension) * phi
 
 

@@ -1,8 +1,9 @@
 #!/usr/bin/env python
 """Import the real MRDLab EndoWrist measurements into ``sample_data/real/`` (issue 6).
 
-Reads every ``load_freq/*.TXT.gz`` and ``pitch_*/*.TXT.gz`` of the MRDLab data set (by default
-``<repo>/../shared/real/mrdlab``, see its PROVENANCE.md) with the built-in ``mrdlab`` preset of
+Reads every ``load_freq/*.TXT.gz`` and ``pitch_*/*.TXT.gz`` of the MRDLab data set
+(``sample_data/real/PROVENANCE.md``; ``--src``, by default the folder ``shared/real/mrdlab``
+beside the repository) with the built-in ``mrdlab`` preset of
 :mod:`hystcli.importer`, resamples to 200 Hz (anti-alias low-pass first) and rounds to 4 decimals
 so the whole copy stays a few MB, adds the condition metadata (``series``, ``setting`` in words,
 ``condition`` = ``load_pct`` (the driver of the condition effects), ``frequency_hz``,
@@ -10,7 +11,7 @@ so the whole copy stays a few MB, adds the condition metadata (``series``, ``set
 one run CSV per file plus PROVENANCE.md (with its ODbL notice and a note on this conversion) and
 the folders' ReadME.txt, and prints a summary table.
 
-    python scripts/import_real.py                      # ../shared/real/mrdlab -> sample_data/real
+    python scripts/import_real.py                      # the default --src -> sample_data/real
     python scripts/import_real.py --src DIR --out DIR --rate 200 --zero none
 
 Same input, same bytes: nothing here is random and no wall-clock time is written.
@@ -62,7 +63,7 @@ derived database and stays under the ODbL 1.0 (contents: DbCL 1.0), with the att
 def parse_args(argv: list[str] | None = None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--src", type=Path, default=REPO.parent / "shared" / "real" / "mrdlab",
-                    help="the MRDLab data set folder (default: <repo>/../shared/real/mrdlab)")
+                    help="the MRDLab data set folder (default: shared/real/mrdlab beside the repository)")
     ap.add_argument("--out", type=Path, default=REPO / "sample_data" / "real",
                     help="output folder (default: <repo>/sample_data/real)")
     ap.add_argument("--rate", type=float, default=200.0, help="output sample rate, Hz (default 200)")

@@ -48,9 +48,10 @@ Run the experiment on them from the repository root:
     hyst demo                   # reads sample_data/, prints Tables I and II beside the paper's
     hyst demo --format markdown
 
-Files (run CSVs, DESIGN.md section 6: `# key: value` metadata, then `t` in s, knob `q<k>` and tip
-`y<k>` in deg, motor current `c<k>` in mA, reference `r<k>` in deg; the metadata holds the
-catheter, shape, effects and the twin's true offsets `true_offset<k>`):
+Files (run CSVs, [docs/file-formats.md](../docs/file-formats.md): `# key: value` metadata,
+then `t` in s, knob `q<k>` and tip `y<k>` in deg, motor current `c<k>` in mA, reference `r<k>` in
+deg; the metadata holds the catheter, shape, effects and the twin's true offsets
+`true_offset<k>`):
 
 - `reference_periodic.csv`: the periodic reference `r1` (60 deg amplitude, 0.04 Hz, 2 cycles,
   100 Hz), played on knob 1 and on knob 2 in turn (1-DoF, Table I).

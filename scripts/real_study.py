@@ -26,7 +26,7 @@ from the identification file in that factor only. Two tables:
 
 Columns (held-out RMSE of the jaw angle, deg, pooled over the held-out samples):
 (a) static linear fit ``y = g q + o`` (numpy.polyfit on the identification file);
-(b) ``identify(run)`` (the tip fit of the DESIGN.md model) on the identification file, then
+(b) ``identify(run)`` (the tip fit of the model of docs/design.md section 3) on the identification file, then
     ``predict_tip`` on the held-out files, each starting from its own first measured y (the
     state a user has before predicting), as ``hyst predict`` does;
 (c) (b) plus the effects ``diagnose`` adds, chosen leave-one-condition-out: every condition of
@@ -475,7 +475,7 @@ def render(anat, rows, totals, series_totals, per_file, diags, with_c: bool) -> 
     L += ["The same offsets against the load the cable actually carried: the file's mean back-end "
           "(input spindle) torque after the first "
           f"{SETTLE_S:g} s (column 3 of the originals, mN m; the importer does not keep it, the study "
-          "reads it from `../shared/real/mrdlab`). rms: the offsets' scatter about the line, against "
+          "reads it from the original files). rms: the offsets' scatter about the line, against "
           "the nominal load and against the measured torque. 010 - 000: the two 20 % files (0.5 and "
           "0.3 Hz), their torque difference and offset difference, and the offset difference the "
           "torque line predicts.", "",
@@ -559,7 +559,7 @@ def render(anat, rows, totals, series_totals, per_file, diags, with_c: bool) -> 
 
     if with_c:
         L += ["## 3. Diagnosis across the frequencies and across the loads (Must-show 2)", "",
-              "`diagnose` (leave one run out, every effect of DESIGN.md section 8 a candidate) on all "
+              "`diagnose` (leave one run out, every effect of docs/design.md section 8 a candidate) on all "
               "the files of each condition with the model identified on its identification file. "
               "Before / after: held-out RMSE (deg). Matches: whether the chosen effect is one the "
               "varied factor can cause (load: stretch, friction, deadzone; frequency: rate, latency, "
@@ -662,7 +662,7 @@ def render(anat, rows, totals, series_totals, per_file, diags, with_c: bool) -> 
           "torque came on; the first half-cycle carries that start, which the peak error (PTPE) shows "
           "more than the RMSE.",
           "- Targets: " + "; ".join(verdicts) + ". The identified model (b) has no term for the load "
-          "(the DESIGN.md model is one knob's kinematics), so across the loads only (c), with the "
+          "(the model of docs/design.md is one knob's kinematics), so across the loads only (c), with the "
           "stretch, can meet them"
           + ("; across the frequencies the diagnoses find nothing to add, so (c) equals (b) there."
              if with_c and not any(d.chosen for c, d in diags.items() if c.table == "frequency") else "."),

@@ -14,7 +14,7 @@ swing up (the torque follows the direction, as the backlash does).
 
     python scripts/real_torque_within.py          # about 3 minutes; prints one row per file
 
-Reads ``sample_data/real`` (the runs) and ``../shared/real/mrdlab`` (the torque column, which the
+Reads ``sample_data/real`` (the runs) and the original MRDLab files (the torque column, which the
 import does not keep). Deterministic.
 """
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """CLI tests of `hyst import` (CliRunner) on the committed real excerpt and small synthetic logs.
 
-DESIGN.md section 10: bad input -> exit 1 with one line ``Error: ...``, no traceback, nothing
+docs/design.md section 10: bad input -> exit 1 with one line ``Error: ...``, no traceback, nothing
 written; usage errors exit 2.
 """
 from __future__ import annotations

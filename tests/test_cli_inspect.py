@@ -12,7 +12,7 @@ from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, M
 
 runner = CliRunner()
 EXAMPLE = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)
-# by hand (DESIGN.md section 3): dhat_pos = (h_pos - h_neg)/omega + d_neg + b_neg
+# by hand (docs/design.md section 3): dhat_pos = (h_pos - h_neg)/omega + d_neg + b_neg
 #   = -8.2/1.45 - 8.7 + 5.9 = -8.455172..., dhat_neg = (h_neg - h_pos)/omega + d_pos - b_pos
 #   = 8.2/1.45 + 9.1 - 6.2 = 8.555172...
 DHAT_POS, DHAT_NEG = -8.2 / 1.45 - 2.8, 8.2 / 1.45 + 2.9

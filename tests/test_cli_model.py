@@ -1,6 +1,6 @@
 """CLI tests of identify, compensate, predict and rotate-shift, and the bad-input contract.
 
-DESIGN.md section 10: bad data or a bad model -> exit 1 with one line ``Error: ...`` on stderr, no
+docs/design.md section 10: bad data or a bad model -> exit 1 with one line ``Error: ...`` on stderr, no
 traceback, no output file; usage errors exit 2.
 """
 from __future__ import annotations
@@ -50,7 +50,7 @@ def test_compensate_then_predict_reproduces_the_reference(files):
     res = invoke("predict", files / "cmd.csv", "--model", files / "model.json", "-o", files / "pred.csv")
     assert res.exit_code == 0, res.output
     pred = read_run(files / "pred.csv")
-    # the model driven by its own inverse gives back the reference (DESIGN.md section 3)
+    # the model driven by its own inverse gives back the reference (docs/design.md section 3)
     np.testing.assert_allclose(pred["y1"], cmd["r1"], atol=1e-9)
     np.testing.assert_allclose(pred["y2"], cmd["r2"], atol=1e-9)
 

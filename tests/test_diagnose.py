@@ -218,7 +218,7 @@ def test_bad_inputs_raise_typed_errors_naming_the_problem():
 # the loop phases (hand computed)
 # --------------------------------------------------------------------------------------------
 def test_phases_are_the_paper_lines_on_a_hand_computed_loop():
-    # DESIGN.md example knob: dhat_pos = (-4-4.2)/1.45 - 8.7 + 5.9 = -8.455,
+    # docs/design.md example knob: dhat_pos = (-4-4.2)/1.45 - 8.7 + 5.9 = -8.455,
     # dhat_neg = (4.2+4)/1.45 + 9.1 - 6.2 = 8.555. From y0 = 0 up to u = 40: y is held at 0 (between
     # the envelopes: backlash plateau) until f_up = 0 at u = 9.1 + 4/1.45 = 11.86, then loading
     # slope; y(40) = -4 + 1.45*30.9 = 40.805. Down from 40: held until f_dn = 40.805 at

@@ -1,4 +1,4 @@
-"""The effects of DESIGN.md section 8: null settings reproduce the base model bit for bit, and each
+"""The effects of docs/design.md section 8: null settings reproduce the base model bit for bit, and each
 effect moves the output the documented way (issue 3, must-show 4)."""
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def _sim(effects, q, t, shape=Shape(), **kw):
 # registry and parsing
 # --------------------------------------------------------------------------------------------
 def test_registry_covers_design_section_8():
-    # the eight of DESIGN.md section 8, and stretch: the cable yielding to a stated load (issue 6)
+    # the eight of docs/design.md section 8, and stretch: the cable yielding to a stated load (issue 6)
     assert set(E.EFFECTS) == {"friction", "rate", "coupling", "deadzone", "creep", "latency",
                               "saturation", "contact", "stretch"}
     for et in E.EFFECTS.values():
@@ -120,7 +120,7 @@ def test_null_setting_reproduces_the_base_twin_bit_for_bit(name, data):
     for k in (1, 2):
         assert np.array_equal(null[f"y{k}"], base[f"y{k}"])
         assert np.array_equal(null[f"c{k}"], base[f"c{k}"])
-        # ... and the base twin is the model of DESIGN.md section 3 itself
+        # ... and the base twin is the model of docs/design.md section 3 itself
         assert np.array_equal(base[f"y{k}"], CAT.knobs[k].with_offset(offs[k]).forward(null[f"q{k}"]))
 
 
@@ -128,7 +128,7 @@ def test_null_setting_reproduces_the_base_twin_bit_for_bit(name, data):
 @given(st.lists(st.sampled_from(sorted(E.EFFECTS)), unique=True, max_size=4),
        st.floats(-10, 10), st.sampled_from(["straight", "alpha=90,theta=0", "alpha=45,theta=90"]))
 def test_null_effects_in_predict_equal_knob_forward_bit_for_bit(names, y0, shape):
-    # no geometry: the knobs' own offsets apply whatever the shape (DESIGN.md section 6)
+    # no geometry: the knobs' own offsets apply whatever the shape (docs/design.md section 6)
     model = Model({1: K1.with_offset(3.0), 2: CAT.knobs[2].with_offset(-2.0)})
     run = Run({"t": T_SW, "q1": Q_SW, "q2": Q2_SW, "y1": np.full_like(T_SW, y0)}, {"shape": shape})
     null = [E.make_effect(n, **E.EFFECTS[n].null_params()) for n in names]
@@ -168,7 +168,7 @@ def test_friction_widens_the_loop_as_curvature_grows():
         shape = Shape.parse(f"alpha={alpha},theta=90")  # theta=90: no shift of knob 1
         run = _sim((E.make_effect("friction", mu=0.3),), {1: q}, t, shape)
         widths.append(_loop_width(t, q, run["y1"]))
-        # by hand (DESIGN.md section 3, y = 0 between h_pos and h_neg): ascending at
+        # by hand (docs/design.md section 3, y = 0 between h_pos and h_neg): ascending at
         # d_pos + (0 - h_pos)/omega', descending at d_neg + (0 - h_neg)/omega', omega' = omega/g
         g = math.exp(0.3 * math.radians(alpha))
         assert widths[-1] == pytest.approx(9.1 + 8.7 + (4.2 + 4.0) * g / 1.45, abs=0.05)

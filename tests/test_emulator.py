@@ -83,7 +83,7 @@ def test_move_state_stop_relay_the_twin(server, device):
 
 
 def test_current_grows_once_the_tendon_is_taut(device):
-    # DESIGN.md section 4 on the twin: example-a knob 1 dead zone edge d_pos = 9.1 deg (straight
+    # docs/design.md section 4 on the twin: example-a knob 1 dead zone edge d_pos = 9.1 deg (straight
     # shaft); k_load = 4 mA/deg, so 10 deg past the edge adds ~40 mA (x(1 +- mu)) over no-load
     inside = device.move(1, 2.0, 20.0).current
     device.move(1, 19.0, 20.0)

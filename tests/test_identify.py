@@ -85,7 +85,7 @@ def _fit_or_refusal(run: Run, knob: int = 1):
 
     On records whose tip fit has near-equal optima (within a fraction of a percent in cost),
     which one the local search lands on follows the platform's floating-point kernels (numpy's
-    SIMD dispatch: docs/zoo_history.md, "Stop 41"); on one the fit's degenerate directions leave
+    SIMD dispatch: AVX-512 and AVX2 can differ); on one the fit's degenerate directions leave
     parameters unfixed and identify refuses, naming them. Both outcomes are honest; a test of
     what must never be *claimed* takes either, and checks the claim where one is made.
     """

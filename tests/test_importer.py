@@ -1,7 +1,7 @@
 """Tests of hystcli.importer on a committed real excerpt (tests/data/mrdlab) and on small synthetic logs.
 
 Reference values are read by hand from the raw rows of the excerpt (quoted in the comments) and
-converted with the scales of ../shared/real/mrdlab/PROVENANCE.md: input = counts * 360/8192 deg,
+converted with the scales of sample_data/real/PROVENANCE.md: input = counts * 360/8192 deg,
 jaw = counts * 360/4000 deg, current in A as logged.
 """
 from __future__ import annotations
@@ -67,7 +67,7 @@ def test_preset_metadata_from_header(load41):
     assert meta["frequency_hz"] == "0.50"
     assert meta["amplitude_deg"] == "30.00"
     assert meta["load_pct"] == "20.00"
-    # the load is the run's condition, the driver of the condition effects (DESIGN.md section 8)
+    # the load is the run's condition, the driver of the condition effects (docs/design.md section 8)
     assert meta["condition"] == "20.00"
     assert meta["spindle"] == "left"
     assert meta["motion"] == "periodic"

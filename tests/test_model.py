@@ -12,7 +12,7 @@ from hystcli.errors import ModelError
 from hystcli import model as model_mod
 from hystcli.model import Geometry, KnobModel, Model, Shape, rotate_offsets
 
-# DESIGN.md section 6's example knob.
+# docs/design.md section 6's example knob.
 EXAMPLE = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)
 
 
@@ -82,7 +82,7 @@ def test_forward_walks_the_eight_lines_on_a_full_sweep(p, offset):
 
 
 def test_design_example_derived_edges():
-    # DESIGN.md eq. D_hats by hand: (-4 - 4.2)/1.45 - 8.7 + 5.9 = -8.4551724...
+    # docs/design.md eq. D_hats by hand: (-4 - 4.2)/1.45 - 8.7 + 5.9 = -8.4551724...
     k = KnobModel(**EXAMPLE)
     assert k.dhat_pos == pytest.approx(-8.2 / 1.45 - 2.8, abs=1e-12)
     assert k.dhat_neg == pytest.approx(8.2 / 1.45 + 2.9, abs=1e-12)
@@ -215,7 +215,7 @@ def test_model_rotation_and_offsets_for():
     r = m.rotated(90.0)
     assert r.knob(1).offset == pytest.approx(0.0, abs=1e-12)
     assert r.knob(2).offset == pytest.approx(-13.5)
-    # precedence (DESIGN.md section 6): offsetK, then geometry from shape, then the model's own
+    # precedence (docs/design.md section 6): offsetK, then geometry from shape, then the model's own
     assert m.offsets_for({"offset1": "2.5", "shape": "alpha=90,theta=0"})[1] == 2.5
     assert m.offsets_for({"shape": "alpha=90,theta=90"}) == pytest.approx({1: 0.0, 2: 13.5})
     assert m.offsets_for({}) == {1: 13.5, 2: 0.0}

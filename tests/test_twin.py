@@ -1,4 +1,4 @@
-"""The virtual catheter: determinism, the base model and current of DESIGN.md sections 3-4, the
+"""The virtual catheter: determinism, the base model and current of docs/design.md sections 3-4, the
 protocol's runs, and the live twin matching a batch simulation of the same motion."""
 from __future__ import annotations
 
@@ -81,7 +81,7 @@ def test_periodic_run_of_the_protocol_has_full_metadata():
         assert run.meta[key] == value
     assert float(run.meta["true_offset1"]) == pytest.approx(13.5, abs=1e-6)  # 2 x 6.75
     assert np.array_equal(run["q1"], run["r1"])  # controller none: q = r
-    # 60 deg at 0.04 Hz, 2 cycles (DESIGN.md section 7)
+    # 60 deg at 0.04 Hz, 2 cycles (docs/design.md section 7)
     assert run.t[-1] == pytest.approx(50.0) and np.max(run["r1"]) == pytest.approx(60.0, abs=1e-3)
     other = twin.simulate_motion(CAT, Shape.parse("alpha=90"), "periodic", seed=2, trial=4)
     assert not np.array_equal(run["y1"], other["y1"])  # trials differ

@@ -27,7 +27,7 @@ def diagnose_cmd(
         "--holdout", help="key=value: test on the runs whose metadata key equals value, train on the rest "
                           "(default: leave one run out).")] = None,
     candidates: Annotated[Optional[str], typer.Option(
-        "--candidates", help="Comma-separated effects to try (default: all of DESIGN.md section 8).")] = None,
+        "--candidates", help="Comma-separated effects to try (default: all of docs/design.md section 8).")] = None,
     max_effects: Annotated[int, typer.Option("--max-effects", min=0, help="Most effects to add.")] = 3,
     bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over runs for intervals and "
                                                        "inclusion frequencies (0: none).")] = 0,

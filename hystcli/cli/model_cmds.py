@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import math
+from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
@@ -16,22 +17,29 @@ from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, TravelLi
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
 
+class CurrentSign(str, Enum):
+    """How a drive reports its motor current (:data:`hystcli.settings.CURRENT_SIGNS`)."""
+
+    auto = "auto"
+    signed = "signed"
+    magnitude = "magnitude"
+
+
 @command("identify", "Identify each knob's hysteresis model from a sweep",
          epilog="Example: hyst identify sample_data/ice-a/sweep_knob1.csv -o model.json --plot fit.png")
 def identify_cmd(
     sweep: InputArg,
     output: Annotated[Optional[Path], typer.Option(
-        "--output", "-o", help="Write the model JSON here (atomically); without it the parameters are "
-                               "only printed.")] = None,
+        "--output", "-o", help="Model JSON file to write (atomically); without it the parameters are printed only.")] = None,
     omega: Annotated[Optional[float], typer.Option(
         help="Slope omega when the run has no tip angle y (default: the paper's 1.45).")] = None,
     current_only: Annotated[bool, typer.Option(
         "--current-only", help="Ignore a measured tip angle: edges and backlash from the current alone.")] = False,
-    bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples over cycles for uncertainties "
-                                           "(0: from the fit's covariance).")] = 0,
-    allow_misfit: Annotated[bool, typer.Option(
-        "--allow-misfit", help="Keep the tip fit even when the tip departs from the loop (something the "
-        "model lacks: lag, creep, a wall), with a warning, to diagnose the departure.")] = False,
+    current_sign: Annotated[CurrentSign, typer.Option(
+        "--current-sign", help="How the drive reports its motor current: signed (below its no-load level "
+        "while the negative tendon pulls), magnitude (|I|), or auto (read from the sweep).")] = CurrentSign.auto,
+    level: Annotated[float, typer.Option(
+        "--level", help="Confidence level of the intervals (profile likelihood).")] = 0.95,
     beta_catheter_mm: Annotated[Optional[float], typer.Option(
         help="Tendon offset from the backbone (mm), stored as the model's geometry.")] = None,
     beta_knob_mm: Annotated[Optional[float], typer.Option(help="Knob pulley radius (mm).")] = None,
@@ -43,19 +51,24 @@ def identify_cmd(
 ) -> None:
     """Identify the straight-shaft hysteresis model of each knob from a sweep.
 
-    Reads q<k> and c<k> (and y<k> when present) of every knob in RUN.csv. With y: least-squares
-    fit of all seven parameters through the model; without: dead-zone edges and backlash from the
-    motor current, omega given, heights by the documented assumption. Prints the parameters;
-    -o writes the model that the other commands read.
+    Reads q<k> and c<k> (and y<k> when present) of every knob in RUN.csv. With y: the loop that
+    best predicts the tip, each parameter with its interval (one the sweep cannot fix is reported
+    open, not refused); without: dead-zone edges and backlash where the motor current shows them,
+    omega given, heights by the documented assumption. Prints the parameters; -o writes the model
+    that the other commands read.
     """
     from dataclasses import replace
 
     from .. import io
     from ..identify import identify, plot_identification
     from ..model import Geometry
+    from ..settings import Settings
 
+    del seed  # identification draws nothing at random
     if omega is not None and not (omega > 0 and omega < float("inf")):
         usage_error(f"must be a positive number, got {omega}", "--omega")
+    if not 0.5 <= level < 1.0:
+        usage_error(f"must be in [0.5, 1), got {level}", "--level")
     if (beta_catheter_mm is None) != (beta_knob_mm is None):
         usage_error("give both --beta-catheter-mm and --beta-knob-mm, or neither", "--beta-catheter-mm")
     distinct_outputs(**{"--output": output, "--plot": plot})
@@ -67,32 +80,35 @@ def identify_cmd(
     for target in (output, plot):
         if target is not None:
             io.check_not_input(target, [sweep])
+    settings = Settings(level=level, current_sign=current_sign.value)
     with about(sweep):
         run = load_run(sweep, mapping, quiet=quiet)
-        result = identify(run, omega=omega, use_tip=not current_only, bootstrap=bootstrap, seed=seed,
-                          max_misfit=float("inf") if allow_misfit else None)
+        result = identify(run, omega=omega, use_tip=not current_only, settings=settings)
     for fit in result.fits.values():
         for w in fit.warnings:
             warn(w)
     meta = dict(result.model.meta)
     meta.update(io.provenance(sweep, catheter=run.meta.get("catheter")))
     model = replace(result.model, meta=meta, geometry=geometry or result.model.geometry)
-    # the figure and the model together or neither (an error drawing the one loses no old other)
-    with io.all_or_none() as pending:
-        if plot is not None:
-            plot_identification(run, result, pending.path(plot, inputs=[sweep]))
-        if output is not None:
+    if output is not None:
+        # the figure and the model together or neither (an error drawing the one loses no old other)
+        with io.all_or_none() as pending:
+            if plot is not None:
+                plot_identification(run, result, pending.path(plot, inputs=[sweep]))
             pending.write_text(output, io.dumps_model(model), inputs=[sweep])
+    elif plot is not None:
+        with io.all_or_none() as pending:
+            plot_identification(run, result, pending.path(plot, inputs=[sweep]))
     if not prints(fmt, quiet):
         pass
     elif fmt == OutputFormat.json:
-        echo_json({str(k): {"params": f.model.params(), "stderr": dict(f.stderr), "rmse": f.rmse,
-                            "method": f.method, "warnings": list(f.warnings),
-                            "cogging": _cogging(result, k), "unfixed": list(_unfixed(result, k))}
+        echo_json({str(k): {"params": f.model.params(), "intervals": {n: e.to_dict() for n, e in f.estimates.items()},
+                            "rmse": f.rmse, "method": f.method, "warnings": list(f.warnings),
+                            "current_sign": None if f.current is None else f.current.sign,
+                            "cogging": _cogging(result, k), "unfixed": list(f.unfixed)}
                    for k, f in result.fits.items()})
     elif fmt == OutputFormat.table:
-        for line in _identify_lines(result):
-            typer.echo(line)
+        typer.echo(result.summary())
     else:
         echo_table(_identify_table(result), fmt)
     written = [str(p) for p in (output, plot) if p is not None]
@@ -104,57 +120,25 @@ def _ident(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification
     return result.model.identification.get(knob) if result.model.identification else None
 
 
-def _ripple(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification -> current.Ripple or None
-    """The cogging ripple identify read on this knob's current, or None."""
-    ident = _ident(result, knob)
-    return None if ident is None else ident.ripple
-
-
-def _unfixed(result, knob: int) -> tuple[str, ...]:  # noqa: ANN001 - identify.Identification
-    """The parameters identify left unfixed on this knob (kept in the model without an uncertainty)."""
-    ident = _ident(result, knob)
-    return () if ident is None else ident.unfixed
-
-
 def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
-    """:func:`_ripple` for ``--format json``."""
-    r = _ripple(result, knob)
+    """The cogging ripple identify read on this knob's current, for ``--format json``."""
+    ident = _ident(result, knob)
+    r = None if ident is None else ident.ripple
     return None if r is None else {"period": r.period, "sin": r.sin, "cos": r.cos, "amplitude": r.amplitude}
-
-
-def _identify_lines(result) -> list[str]:  # noqa: ANN001 - identify.Identification
-    from ..model import PARAM_NAMES
-
-    lines = []
-    for k, fit in result.fits.items():
-        lines.append(f"knob {k} ({fit.method}{', RMSE %.2f deg' % fit.rmse if fit.rmse is not None else ''})")
-        for name in PARAM_NAMES:
-            if name == "offset":
-                continue
-            value = getattr(fit.model, name)
-            err = fit.stderr.get(name)
-            lines.append(f"  {name:7s} {value:9.3f}" + (f"  +- {err:.3f}" if err is not None else
-                                                         "  (not fixed)" if name in _unfixed(result, k) else
-                                                         "  (assumed)"))
-        ripple = _ripple(result, k)
-        if ripple is not None:
-            lines.append(f"  motor current: a cogging ripple of +-{ripple.amplitude:.3g} mA every {ripple.period:.3g} deg "
-                         "of knob (detect-shift takes it out of its readings)")
-    return lines
 
 
 def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -> metrics.Table
     from ..metrics import Table
-    from ..model import PARAM_NAMES
 
     rows = []
     for k, fit in result.fits.items():
-        for name in PARAM_NAMES:
-            if name != "offset":
-                rows.append((k, name, getattr(fit.model, name), fit.stderr.get(name), fit.method, fit.rmse))
-    return Table(("knob", "parameter", "value", "stderr", "method", "rmse"),
-                 ("knob", "parameter", "value", "+- (1 sigma)", "method", "RMSE (deg)"), tuple(rows),
-                 ("deg, omega in deg/deg; '-': fixed by assumption (current-only identification)",))
+        for name, e in fit.estimates.items():
+            rows.append((k, name, e.value, e.lo if e.lo != float("-inf") else None,
+                         e.hi if e.hi != float("inf") else None, "yes" if e.fixed else "no", fit.method, fit.rmse))
+    return Table(("knob", "parameter", "value", "lo", "hi", "fixed", "method", "rmse"),
+                 ("knob", "parameter", "value", "low", "high", "fixed", "method", "RMSE (deg)"), tuple(rows),
+                 ("deg, omega in deg/deg; low/high: the 95 % profile-likelihood interval, empty where the sweep "
+                  "says nothing that way; current-only: omega and the heights are assumed",))
 
 
 @command("compensate", "Turn desired tip angles into knob commands",
@@ -298,7 +282,7 @@ def rotate_shift_cmd(
 ) -> None:
     """Update both knobs' offsets after a bulk rotation of the catheter body, without moving a knob.
 
-    The vector (offset1, offset2) rotates by -degrees (DESIGN.md section 3; the paper leaves
+    The vector (offset1, offset2) rotates by -degrees (docs/design.md section 3; the paper leaves
     this case out).
     """
     from .. import io

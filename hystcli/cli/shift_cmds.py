@@ -59,19 +59,16 @@ def _notes(r: shift_mod.ShiftResult) -> list[str]:
     """What the search did beyond the plain walk to an edge, in words."""
     notes = []
     if r.start_outside:
-        notes.append("started with a tendon taut: crossed the dead zone"
-                     + (", the far edge out of reach: walked back to the edge it left" if r.walked_back else ""))
-    elif r.walked_back:
-        notes.append("the edge it went for out of reach: walked back across the dead zone to the other")
+        notes.append("started with the tendon ahead taut: turned and crossed the dead zone")
     if r.contacts:
         notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
-    if r.reference == "current":
-        notes.append(f"offset from d_{r.edge} as the sweep's current showed it (the tip fit could not place it)")
+    if r.reference == "model":
+        notes.append("offset from the model's edge (the model keeps no reading of the current)")
     return notes
 
 
-_NOTE = ("deg; offset = edge - D of the straight-shaft model; +- the edge's standard error; clarity the jump "
-         "in current slope at it in standard errors; shifted model written to {output}")
+_NOTE = ("deg; offset = where the current takes the tendon up now minus where the straight-shaft sweep's "
+         "current did; its 95 % interval beside it; shifted model written to {output}")
 
 
 def _text(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
@@ -80,16 +77,14 @@ def _text(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
 
     from ..metrics import TEXT_WIDTH
 
-    head = (f"{'knob':>4}  {'offset':>8}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  {'+-':>5}  {'clarity':>7}  "
+    head = (f"{'knob':>4}  {'offset':>8}  {'interval':>17}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  "
             f"{'travel':>7}  {'steps':>5}")
     lines = [head, "-" * len(head)]
     notes = []
     for k, r in results.items():
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
-        ev = r.evidence
-        se = f"{ev.edge_se:5.2f}" if ev is not None else f"{'-':>5}"
-        clar = f"{ev.clarity:7.1f}" if ev is not None else f"{'-':>7}"
-        lines.append(f"{k:>4}  {r.offset:>+8.2f}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  {se}  {clar}  "
+        interval = f"[{r.offset_lo:+.2f}, {r.offset_hi:+.2f}]"
+        lines.append(f"{k:>4}  {r.offset:>+8.2f}  {interval:>17}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  "
                      f"{r.travel:>7.1f}  {r.steps:>5}")
         notes += [f"knob {k}: {n}" for n in _notes(r)]
     return "\n".join(lines + [""] + [w for n in notes + [_NOTE.format(output=output)]
@@ -100,13 +95,11 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> Any:
     """The offsets found as a :class:`hystcli.metrics.Table` (``--format`` csv/markdown/latex)."""
     from ..metrics import Table
 
-    rows = tuple((k, r.offset, r.d_neg, r.d_pos, r.edge, r.edge_found_at,
-                  None if r.evidence is None else r.evidence.edge_se,
-                  None if r.evidence is None else r.evidence.clarity, r.travel, r.steps, "; ".join(_notes(r)))
-                 for k, r in results.items())
-    return Table(("knob", "offset", "d_neg", "d_pos", "edge", "edge_at", "edge_se", "clarity", "travel", "steps",
+    rows = tuple((k, r.offset, r.offset_lo, r.offset_hi, r.d_neg, r.d_pos, r.edge, r.edge_found_at, r.travel,
+                  r.steps, "; ".join(_notes(r))) for k, r in results.items())
+    return Table(("knob", "offset", "offset_lo", "offset_hi", "d_neg", "d_pos", "edge", "edge_at", "travel", "steps",
                   "notes"),
-                 ("knob", "offset", "d~_neg", "d~_pos", "edge", "at", "+-", "clarity", "travel", "steps", "notes"),
+                 ("knob", "offset", "low", "high", "d~_neg", "d~_pos", "edge", "at", "travel", "steps", "notes"),
                  rows, (_NOTE.format(output=output),))
 
 
@@ -115,15 +108,14 @@ def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> Any:
     help=(
         "Detect the hysteresis shift of each knob after the shaft took a new shape, by the "
         "motor current (Algorithm 1 of the paper), and write the shifted model.\n\n"
-        "The knob is stepped by --step degrees. The current's level tells the start: no tendon "
-        "taut (the search goes its way) or one taut (it turns and crosses the dead zone to the "
-        "far edge; a current moving back to its no-load level is a tendon unloading, never an "
-        "edge). The edge is where the current's slope jumps out of the dead zone to a loaded one "
-        "(>= eps_lower): offset = edge - D_pos moving +, edge - D_neg moving -. A slope beyond "
-        "eps_upper is a wall: reverse and find the other edge. Every offset carries its "
-        "evidence (the jump's clarity, the edge's standard error); weak evidence is refused "
-        "with the reason (exit 1). Thresholds and levels come from the model's identification "
-        "unless given. The search never exceeds --max-steps / --max-travel and returns the knob "
+        "The knob is stepped by --step degrees and the current read at each step. The readings "
+        "since the last turn are read as a broken line; the edge is where the tendon ahead is "
+        "taken up: a change point declared at a stated false-alarm rate (--false-alarm), at the "
+        "current where the identification sweep's current took that tendon up. The offset is "
+        "that edge minus the sweep's, with its interval; wider than +-0.5 deg, the command "
+        "refuses (exit 1) rather than move the robot by it. A start with the tendon ahead "
+        "taut turns and crosses the dead zone; a slope beyond eps_upper is a contact: "
+        "reverse. The search never exceeds --max-steps / --max-travel and returns the knob "
         "to where it began.\n\n"
         "A REPLAY.csv (a run recorded under the new shape: a slow sweep from the rest position) is "
         "walked as if the knob were stepped; --port runs it live on the robot.\n\n"
@@ -145,12 +137,10 @@ def detect_shift_cmd(
     knob: Annotated[Optional[list[str]], typer.Option(
         "--knob", metavar="K", help="Search these knobs only: 1, 2 or 1,2 (default: every knob of the model "
                                     "the source has).", show_default=False)] = None,
-    eps_lower: Annotated[Optional[float], typer.Option(
-        "--eps-lower", help="eps_lower, mA/deg (default: from the model's identification).")] = None,
     eps_upper: Annotated[Optional[float], typer.Option(
-        "--eps-upper", help="eps_upper (contact), mA/deg (default: from the model's identification).")] = None,
-    current_dead_zone: Annotated[Optional[float], typer.Option(
-        "--current-dead-zone", help="Motor current with no tendon taut, mA (default: from the model).")] = None,
+        "--eps-upper", help="Contact slope, mA/deg (default: four times the sweep's loaded slope).")] = None,
+    false_alarm: Annotated[float, typer.Option(
+        "--false-alarm", help="Probability that a search along a stretch with no edge declares one.")] = 1e-3,
     step: Annotated[float, typer.Option("--step", help="Unit step u, deg.")] = 0.5,
     max_steps: Annotated[Optional[int], typer.Option(
         "--max-steps", help="Step limit (default: max-travel / step).")] = None,
@@ -190,14 +180,10 @@ def detect_shift_cmd(
             raise typer.BadParameter(f"must be between 0 and {device.MAX_DWELL:g} s, got {v}", param_hint=name)
     if max_steps is not None and max_steps < 1:
         raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
-    for name, v in (("--eps-lower", eps_lower), ("--eps-upper", eps_upper)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
-    if eps_lower is not None and eps_upper is not None and not eps_upper > eps_lower:
-        raise typer.BadParameter(f"must be greater than --eps-lower ({eps_lower:g}), got {eps_upper:g}",
-                                 param_hint="--eps-upper")
-    if current_dead_zone is not None and not math.isfinite(current_dead_zone):
-        raise typer.BadParameter(f"must be a finite current, got {current_dead_zone}", param_hint="--current-dead-zone")
+    if eps_upper is not None and not (math.isfinite(eps_upper) and eps_upper > 0):
+        raise typer.BadParameter(f"must be a positive number, got {eps_upper}", param_hint="--eps-upper")
+    if not 0.0 < false_alarm < 0.5:
+        raise typer.BadParameter(f"must be in (0, 0.5), got {false_alarm}", param_hint="--false-alarm")
     inputs = [model_path] + ([replay] if replay is not None else [])
     # refuse a bad output before anything moves
     check_not_input(output, inputs)
@@ -214,8 +200,10 @@ def detect_shift_cmd(
     knob_sel = parse_knobs(knob)
     model = load_model(model_path)
     knobs = None if knob_sel is None else list(knob_sel)
-    options = dict(eps_lower=eps_lower, eps_upper=eps_upper, current_dead_zone=current_dead_zone,
-                   step=step, max_steps=max_steps, max_travel=max_travel)
+    from ..settings import Settings
+
+    options = dict(eps_upper=eps_upper, settings=Settings(false_alarm=false_alarm), step=step, max_steps=max_steps,
+                   max_travel=max_travel)
     results: dict[int, shift_mod.ShiftResult] = {}
     with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window,
                  timeout, mapping, quiet) as (probes, run):

@@ -50,7 +50,7 @@ def simulate_cmd(
 
     A generated periodic or non-periodic motion is played with controller none (q = r); with a
     COMMANDS.csv the knob commands come from the file. Effects: friction, rate, coupling,
-    deadzone, creep, latency, saturation, contact (DESIGN.md section 8).
+    deadzone, creep, latency, saturation, contact (docs/design.md section 8).
     """
     from .. import io
     from ..calibration import calibrated_catheter

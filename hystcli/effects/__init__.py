@@ -1,4 +1,4 @@
-"""Effects the base model leaves out (DESIGN.md section 8), as plug-ins shared by the twin, the
+"""Effects the base model leaves out (docs/design.md section 8), as plug-ins shared by the twin, the
 model's prediction and compensation, and the diagnosis.
 
 One module per effect owns its physics (forward and inverse stage, each with an explicit state),

@@ -1,4 +1,4 @@
-"""The effect unit: what every effect of DESIGN.md section 8 owns, and the object that carries its
+"""The effect unit: what every effect of docs/design.md section 8 owns, and the object that carries its
 parameter values.
 
 An effect type (one subclass of :class:`EffectType` per module of this package) owns

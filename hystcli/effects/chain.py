@@ -7,7 +7,7 @@ form names its stage and its rank within it, :class:`~hystcli.effects.base.Form`
     condition   knob parameters from the run's shape (total curvature) or stated condition
     input       the input x the hysteresis sees, from the commands (lags, coupling)
     edges       dead-zone edges that move sample by sample (coupling that moves the dead zone)
-    hysteresis  y_h = the model of DESIGN.md section 3 on x, from y_h0
+    hysteresis  y_h = the model of docs/design.md section 3 on x, from y_h0
     output      the physical tip, from y_h (saturation, creep, output lags, output coupling)
     contact     the tip stops at a wall
     sensor      what the tracker reports (latency)

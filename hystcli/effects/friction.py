@@ -3,7 +3,7 @@
 The sheath eats tension exponentially along a curved path (capstan law): with
 ``g = exp(mu * kappa)``, kappa the total curvature ``sum |alpha_i|`` in rad (or the run's stated
 ``condition``), the knob must travel further before the tip follows and the tip follows less of
-each degree. Forms: how the curvature shows on the loop (DESIGN.md section 3's parameters)
+each degree. Forms: how the curvature shows on the loop (docs/design.md section 3's parameters)
 
 =========  ==========================================  ===========================================
 form       knob parameters under curvature kappa         direction when on (mu > 0)

@@ -150,7 +150,7 @@ def knob_speed_kernel(x, t, tau, st, out):
 
 @njit(cache=True, fastmath=False)
 def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, dp, dn, ep, en, y0, out):
-    """The clamp recursion of DESIGN.md section 3 with edges that move sample by sample.
+    """The clamp recursion of docs/design.md section 3 with edges that move sample by sample.
 
     At sample i the edges are ``d_pos + dp[i]`` and ``d_neg + dn[i]``; the far edges (the backlash
     plateaus' ends) follow them by eq. D_hats (``dhat_pos`` moves with ``d_neg``, ``dhat_neg`` with

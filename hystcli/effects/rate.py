@@ -28,7 +28,7 @@ lead limit, so its compensation is approximate (better than none by more than ha
 
 ``backlash``: the tendon drags in its sheath with a force growing with its speed, so after a
 reversal the knob travels further before the tip follows, the faster the further. In the model's
-terms (DESIGN.md section 3) the plateau ends move apart from the dead zone: ``dhat_pos + c|v|``,
+terms (docs/design.md section 3) the plateau ends move apart from the dead zone: ``dhat_pos + c|v|``,
 ``dhat_neg - c|v|`` (:func:`hystcli.effects.kernels.forward_edges_kernel`'s ``ep``/``en``), while
 ``d_pos``/``d_neg`` stay (the engaging tendon's edge: its drag shows as the slope's lag, the
 ``input`` forms). A constant speed v makes the backlash plateau ``c*v`` longer; at rest it is the

@@ -1,4 +1,4 @@
-"""The one place that lists the effects (DESIGN.md section 8), and how effects are named in files
+"""The one place that lists the effects (docs/design.md section 8), and how effects are named in files
 and on the command line.
 
 A new effect is one module of this package with one :class:`~hystcli.effects.base.EffectType`

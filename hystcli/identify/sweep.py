@@ -8,14 +8,13 @@ never reverses); whether the edges were passed is judged once the loop is fitted
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import njit
 
 from ..errors import IdentificationError
 from ..io import Run
+from ..signal.stretches import decimation_index, find_reversals
 
 MIN_SAMPLES = 100
 """Fewest samples of a sweep :func:`check_sweep` accepts."""
@@ -71,92 +70,6 @@ class SweepCheck:
     def n_cycles(self) -> int:
         """Full cycles: pairs of complete branches (one each way)."""
         return len(self.branches) // 2
-
-
-# --------------------------------------------------------------------------------------------
-# reversals
-# --------------------------------------------------------------------------------------------
-@njit(cache=True)
-def _reversal_kernel(q, tol, idx, top):
-    # A reversal is a running extreme that the knob then leaves by more than tol in the other
-    # direction; the tolerance keeps encoder jitter from counting as reversals.
-    n = q.shape[0]
-    count = 0
-    direction = 0
-    hi = 0
-    lo = 0
-    ext = 0
-    for i in range(1, n):
-        if direction == 0:
-            if q[i] > q[hi]:
-                hi = i
-            if q[i] < q[lo]:
-                lo = i
-            if q[hi] - q[lo] > tol:
-                if hi > lo:
-                    direction = 1
-                    ext = hi
-                else:
-                    direction = -1
-                    ext = lo
-        elif direction > 0:
-            if q[i] > q[ext]:
-                ext = i
-            elif q[ext] - q[i] > tol:
-                idx[count] = ext
-                top[count] = True
-                count += 1
-                direction = -1
-                ext = i
-        else:
-            if q[i] < q[ext]:
-                ext = i
-            elif q[i] - q[ext] > tol:
-                idx[count] = ext
-                top[count] = False
-                count += 1
-                direction = 1
-                ext = i
-    return count
-
-
-def find_reversals(q: np.ndarray, tol: float | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Sample indices where the knob command reverses, and whether each is a top.
-
-    Parameters
-    ----------
-    q : numpy.ndarray
-        Knob command (deg).
-    tol : float, optional
-        How far (deg) the knob must come back from an extreme for it to count as a reversal.
-        Default: 1 % of the range of ``q``, at least 0.25 deg.
-
-    Returns
-    -------
-    (numpy.ndarray of int, numpy.ndarray of bool)
-    """
-    q = np.ascontiguousarray(q, dtype=np.float64)
-    if tol is None:
-        tol = max(0.25, 0.01 * float(np.ptp(q))) if q.size else 0.25
-    idx = np.empty(max(q.size, 1), dtype=np.int64)
-    top = np.empty(max(q.size, 1), dtype=np.bool_)
-    n = _reversal_kernel(q, float(tol), idx, top) if q.size > 1 else 0
-    return idx[:n].copy(), top[:n].copy()
-
-
-def decimation_index(q: np.ndarray, limit: int, keep: np.ndarray | None = None) -> np.ndarray:
-    """Indices of at most about ``limit`` samples, evenly spread, every local extreme of ``q`` kept.
-
-    The clamp recursion depends only on the extremes of each monotone stretch of its input, so
-    dropping samples between kept extremes leaves the output at the kept samples unchanged.
-    """
-    q = np.asarray(q, float)
-    n = q.size
-    if n <= limit:
-        return np.arange(n)
-    stride = int(math.ceil(n / limit))
-    extra = find_reversals(q, tol=1e-3 * float(np.ptp(q)))[0] if keep is None else np.asarray(keep, dtype=np.int64)
-    return np.union1d(np.arange(0, n, stride), np.concatenate([extra, [n - 1]]))
 
 
 # --------------------------------------------------------------------------------------------

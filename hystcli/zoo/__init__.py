@@ -2,14 +2,14 @@
 
 The code under test (identification, shift detection, the twin and its effects, diagnosis) must
 hold on catheters we did not build. The plants in this package were written from the physics of
-DESIGN.md sections 2-4 and 6 and the paper, by authors who did not read that code, and they
+docs/design.md sections 2-4 and 6 and the paper, by authors who did not read that code, and they
 import nothing from the rest of :mod:`hystcli`. Tests and benches feed their records to the
 commands exactly as a user's logs would be: as run CSV text.
 
 Modules
 -------
 plants
-    One-knob plants: the dead-zone + backlash tip of DESIGN.md section 3 under many motor-current
+    One-knob plants: the dead-zone + backlash tip of docs/design.md section 3 under many motor-current
     laws, samplings, noise levels, sweeps and start states; straight sweeps for identification,
     replays recorded after a bend for shift detection, and a steppable plant for the live path.
 catheters

@@ -1,13 +1,13 @@
 """Two-knob test catheters with unmodelled effects ("catheter zoo"), as run sets for diagnosis.
 
-Written from the physics alone (DESIGN.md sections 1-3, 6 and 8, and the paper's sections II-III);
+Written from the physics alone (docs/design.md sections 1-3, 6 and 8, and the paper's sections II-III);
 imports only numpy, scipy, the standard library and the zoo's own modules (``plants``,
 ``plants_kernel``, ``catheters_kernel``, ``catheters_effects``). Nothing here knows how the tool
 under test models, simulates or diagnoses these effects.
 
 A catheter
 ==========
-Two knobs (1 anterior-posterior, 2 right-left), each a dead-zone + backlash hysteresis of DESIGN.md
+Two knobs (1 anterior-posterior, 2 right-left), each a dead-zone + backlash hysteresis of docs/design.md
 section 3 (``plants.KnobTruth``, straight shaft), drawn near the paper's catheters: dead-zone edges
 3-13 deg either side, backlash 2-8 deg, omega 1.2-1.7, plateau band (h_neg - h_pos) of 2-8 deg of
 knob times omega. A bent shaft moves each knob's loop along its axis by the paper's shift,
@@ -24,13 +24,13 @@ against without) on the runs where the effect's driver acts, drawn in
 solving the form's strength scalar within its physical range (``factors['visibility']`` gives
 what was reached).
 
-A case's records (run CSV text of DESIGN.md section 6)
+A case's records (run CSV text of docs/design.md section 6)
 =====================================================
 ``sweep``: the identification sweep on the straight shaft at the reference load: one knob at a
 time (or, in 20 % of cases, both at once, knob 2 at 3/4 of knob 1's frequency), a sine of
 +-40 deg, 2 cycles, at 40 deg/s and 1 kHz (the paper's protocol) or at 15-25 deg/s and 250 Hz;
 columns ``t, q1, q2, y1, y2, c1, c2``. Every effect is in it, at its straight / reference setting.
-The motor current follows a law written from DESIGN.md section 4 on the tendon loads of
+The motor current follows a law written from docs/design.md section 4 on the tendon loads of
 ``plants_kernel`` (a stretch, tip-load or drop-at-reversal tendon, sometimes pretension,
 motor Coulomb/viscous friction or a stiffening tendon), with current noise, quantisation and,
 in half the cases, the lab's zero-phase 20 Hz Butterworth filter on current and tip.
@@ -117,7 +117,7 @@ def _draw_knob(rng) -> KnobTruth:
 
 
 def _draw_law(rng) -> dict:
-    """Motor current law of one knob (DESIGN.md section 4), drawn in a fixed order."""
+    """Motor current law of one knob (docs/design.md section 4), drawn in a fixed order."""
     d = {}
     d["base"] = str(rng.choice(["stretch", "tip-load", "drop"]))
     k_mean = _lu(rng, 3.0, 30.0)

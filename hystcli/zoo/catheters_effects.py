@@ -1,6 +1,6 @@
 """The unmodelled effects of the zoo catheters, each written from its physics in several forms.
 
-Written from DESIGN.md sections 2, 3 and 8 and the paper alone; imports numpy, scipy and the
+Written from docs/design.md sections 2, 3 and 8 and the paper alone; imports numpy, scipy and the
 zoo's own kernel. Nothing here knows how the tool under test models these effects.
 
 Every form has one *strength scalar* (``STRENGTH_KEY``): the catheter builder draws the form's

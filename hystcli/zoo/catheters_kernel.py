@@ -1,6 +1,6 @@
 """Sample-by-sample core of the zoo catheters: two clamp recursions that see each other.
 
-Written from DESIGN.md section 3 alone (imports numpy and, optionally, numba). Each knob's tip
+Written from docs/design.md section 3 alone (imports numpy and, optionally, numba). Each knob's tip
 follows y_t = min(max(y_{t-1}, f_up(u_t)), f_dn(u_t)) with the section 3 envelopes, but the
 envelope parameters may move from sample to sample:
 

@@ -1,11 +1,11 @@
 """One-knob test catheters ("plants") written from the physics alone.
 
-Nothing here imports the rest of :mod:`hystcli`; the plants were written from DESIGN.md sections
+Nothing here imports the rest of :mod:`hystcli`; the plants were written from docs/design.md sections
 1-4 and 6 and the paper (section II equations, section III protocol).
 
 The tip
 =======
-The tip angle follows DESIGN.md section 3 exactly: parameters ``d_pos, d_neg, b_pos, b_neg,
+The tip angle follows docs/design.md section 3 exactly: parameters ``d_pos, d_neg, b_pos, b_neg,
 omega, h_pos, h_neg, offset``, derived ``dhat_pos = (h_pos-h_neg)/omega + d_neg + b_neg`` and
 ``dhat_neg = (h_neg-h_pos)/omega + d_pos - b_pos``, envelopes ``f_up``/``f_dn`` on
 ``u = q - offset`` and the clamp recursion ``y_t = min(max(y_{t-1}, f_up(u_t)), f_dn(u_t))``.
@@ -148,7 +148,7 @@ _PRE_STEP = 0.05  # deg between samples of a simulated (unrecorded) history
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class KnobTruth:
-    """True DESIGN.md section 3 parameters of one knob. Invalid sets raise ValueError."""
+    """True docs/design.md section 3 parameters of one knob. Invalid sets raise ValueError."""
 
     d_pos: float
     d_neg: float
@@ -438,7 +438,7 @@ def _taut(st: np.ndarray) -> str:
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Record:
-    """One recorded run: DESIGN.md section 6 columns and metadata."""
+    """One recorded run: docs/design.md section 6 columns and metadata."""
 
     columns: dict[str, np.ndarray]
     meta: dict[str, str] = field(default_factory=dict)

@@ -1,6 +1,6 @@
 """Sample-by-sample core of the zoo plants: the tip clamp recursion and the two tendon loads.
 
-Written from DESIGN.md section 3 and the paper alone; imports numpy and (optionally) numba.
+Written from docs/design.md section 3 and the paper alone; imports numpy and (optionally) numba.
 Everything here works on the shifted knob coordinate ``u = q - offset``: the hysteresis loop of
 the tip and of every tendon load lives in ``u``, which is what makes a bend of the shaft move the
 whole loop (tip and current alike) along the knob axis by exactly ``offset``.
