@@ -6,7 +6,7 @@ leniently (a bad cell becomes NaN and a problem, never an exception) and returns
 refuse the file or read a wrong number from it) or ``warning`` (it would run, on data that likely
 cannot give what it is for). :func:`check_run` runs the physical checks on a run already read.
 
-The physical checks and the figures they use:
+The physical checks read the data as identify does (:mod:`hystcli.signal`):
 
 - time: non-increasing steps (error); sample-rate jitter, the standard deviation of the time
   steps over their median, and gaps longer than :data:`hystcli.importer.IRREGULAR` median steps
@@ -14,14 +14,15 @@ The physical checks and the figures they use:
 - a tip that never moves: the tip's robust range (1st to 99th percentile) under
   :data:`MIN_SIGNAL_TO_NOISE` times its noise, the noise estimated from second differences
   (:func:`noise`), which a smooth motion hardly enters;
-- a knob that never reverses: no turning point (:func:`turning_points`) in its angle;
-- a current that never goes below its no-load level: the current's median per knob-angle bin is
-  lowest inside the travel and rises toward both ends (:func:`magnitude_only`). A signed motor
-  current falls below its no-load level once the knob takes up the other tendon (past the
-  negative dead-zone edge); one that rises on both sides is a magnitude ``|I|``;
-- a sweep that never passes an edge: on no monotone stretch of the knob does a two-piece line
-  (a hinge at the best of the stretch's inner quantiles) beat one line by :data:`MIN_DELTA_BIC`
-  in BIC (:func:`slope_change`): the current's slope never changes along the knob, so no
+- a knob that never reverses: no reversal (:func:`hystcli.signal.stretches.find_reversals`);
+- a current that never goes below its no-load level: it dips inside the swept range and rises
+  from there both ways (:func:`hystcli.signal.reading.detect_sign`). A signed motor current falls
+  below its no-load level once the knob takes up the other tendon (past the negative dead-zone
+  edge); one that rises on both sides is a magnitude ``|I|``. A warning when the sign is left to
+  identify (``auto``, which reads it so), an error when the user says the current is signed;
+- a sweep that never passes an edge: on no monotone stretch of the knob does a continuous broken
+  line of two pieces beat one line by BIC (:func:`hystcli.signal.pwl.fit_piecewise`, which counts
+  the residuals' autocorrelation): the current's slope never changes along the knob, so no
   dead-zone edge can be read from it.
 
 The core never imports typer or rich; nothing here writes.
@@ -38,15 +39,12 @@ import numpy as np
 
 from .errors import DataError, HystError
 from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run
+from .settings import CURRENT_SIGNS
 from .io import _parse_meta_line as _meta_line
 
 ERROR = "error"
 WARNING = "warning"
 LEVELS = (ERROR, WARNING)
-
-CURRENT_SIGNS = ("signed", "magnitude")
-"""How a drive reports its motor current: signed (below the no-load level for the other tendon)
-or its magnitude only."""
 
 MIN_ROWS = 10
 """Fewer data rows than this is no run."""
@@ -59,23 +57,12 @@ MIN_SIGNAL_TO_NOISE = 10.0
 """A signal whose robust range is under this many noise standard deviations does not move: pure
 noise spans about 5 of them over a thousand samples, a swept tip hundreds."""
 
-MIN_DELTA_BIC = 10.0
-"""BIC gain of the two-piece line over one line that shows a slope change: 10 is "very strong"
-evidence on Kass and Raftery's scale, which autocorrelated noise (a filtered current) inflates;
-stretches are thinned to :data:`EDGE_TEST_POINTS` samples for that reason."""
-
-EDGE_TEST_POINTS = 200
-"""Samples of one monotone stretch the slope-change test uses (evenly spaced): enough to see an
-edge, few enough that neighbouring samples' correlated noise does not pass for one."""
-
 MIN_STRETCH_POINTS = 30
 """A monotone stretch with fewer samples is too short to test for a slope change."""
 
-MAGNITUDE_BINS = 20
-"""Knob-angle bins of the current's median profile in :func:`magnitude_only`."""
-
-MAGNITUDE_RISE = 0.25
-"""Each end of the profile must rise above its lowest bin by this fraction of its span."""
+EDGE_TEST_POINTS = 2000
+"""Most samples of one monotone stretch the slope-change fit reads (evenly spaced; the fit counts
+the residuals' autocorrelation, so thinning costs precision, not honesty)."""
 
 
 @dataclass(frozen=True)
@@ -171,87 +158,30 @@ def robust_range(x: np.ndarray) -> float:
     return float(hi - lo)
 
 
-def turning_points(q: np.ndarray, band: float) -> list[int]:
-    """Indices where ``q`` turns back by more than ``band`` (a zigzag filter).
-
-    A turn counts once ``q`` has come back ``band`` from its last extreme, so noise and dither
-    smaller than ``band`` are no reversal. Returns the indices of the extremes, in order.
-    """
-    turns: list[int] = []
-    lo = hi = float(q[0])
-    direction, ext_i, ext = 0, 0, lo
-    for i, x in enumerate(map(float, q)):
-        if direction == 0:  # no way yet: the first move beyond the band sets it
-            lo, hi = min(lo, x), max(hi, x)
-            if x - lo > band or hi - x > band:
-                direction, ext_i, ext = (1 if x - lo > band else -1), i, x
-        elif (x - ext) * direction > 0:
-            ext_i, ext = i, x
-        elif abs(x - ext) > band:
-            turns.append(ext_i)
-            direction, ext_i, ext = -direction, i, x
-    return turns
-
-
 def _stride(n: int, most: int) -> int:
     return max(1, int(math.ceil(n / most)))
 
 
-def slope_change(q: np.ndarray, c: np.ndarray) -> float:
-    """BIC gain of a two-piece line (a hinge) over one line for ``c`` against ``q``.
+def passes_an_edge(q: np.ndarray, c: np.ndarray) -> tuple[bool, int]:
+    """Whether the current's slope changes along the knob on some monotone stretch, and how many
+    stretches were long enough to tell (:data:`MIN_STRETCH_POINTS`).
 
-    One line has 2 parameters; the hinge ``a + b q + g max(0, q - k)`` has 4 (its knot ``k`` the
-    best of the 10th to 90th percentiles of ``q``). Gain = BIC(one) - BIC(hinge), BIC = n ln(RSS /
-    n) + p ln n: positive when the slope change explains more than its two parameters cost.
+    Each stretch is read as identify reads it: against the knob angle along the motion, a
+    continuous broken line of one or two pieces, chosen by BIC.
     """
-    q = np.asarray(q, dtype=float)
-    c = np.asarray(c, dtype=float)
-    n = q.size
-    one = np.column_stack([np.ones(n), q])
+    from .signal.pwl import fit_piecewise
+    from .signal.stretches import monotone_stretches
 
-    def rss(design: np.ndarray) -> float:
-        coef, *_ = np.linalg.lstsq(design, c, rcond=None)
-        r = c - design @ coef
-        return max(float(r @ r), 1e-300)
-
-    rss1 = rss(one)
-    best = min(rss(np.column_stack([one, np.maximum(q - k, 0.0)]))
-               for k in np.unique(np.percentile(q, np.linspace(10, 90, 33))))
-    return (n * math.log(rss1 / n) + 2 * math.log(n)) - (n * math.log(best / n) + 4 * math.log(n))
-
-
-def magnitude_only(q: np.ndarray, c: np.ndarray) -> dict | None:
-    """Signs of a magnitude-only current: its median per knob-angle bin is lowest inside the
-    travel and rises toward both ends, each by :data:`MAGNITUDE_RISE` of the profile's span.
-
-    Returns the figures (``level`` and ``q_at`` of the lowest bin, ``left``/``right`` and
-    ``q_left``/``q_right`` of the end bins), or None when the current does not look so (or the
-    knob covers too little to tell). The span must exceed :data:`MIN_SIGNAL_TO_NOISE` noise
-    standard deviations: a flat, noisy current is no V.
-    """
-    lo, hi = np.percentile(q, [1.0, 99.0])
-    if not hi > lo:
-        return None
-    edges = np.linspace(lo, hi, MAGNITUDE_BINS + 1)
-    idx = np.clip(np.searchsorted(edges, q, side="right") - 1, 0, MAGNITUDE_BINS - 1)
-    med = np.full(MAGNITUDE_BINS, np.nan)
-    for b in range(MAGNITUDE_BINS):
-        sel = c[idx == b]
-        if sel.size >= 5:
-            med[b] = np.median(sel)
-    filled = np.flatnonzero(np.isfinite(med))
-    if filled.size < MAGNITUDE_BINS // 2:
-        return None
-    centres = 0.5 * (edges[:-1] + edges[1:])
-    first, last = filled[0], filled[-1]
-    low = int(filled[np.argmin(med[filled])])
-    span = float(np.nanmax(med) - med[low])
-    inner = first + 2 < low < last - 2
-    rises = min(med[first], med[last]) - med[low]
-    if not (inner and span > MIN_SIGNAL_TO_NOISE * noise(c) and rises > MAGNITUDE_RISE * span):
-        return None
-    return {"level": float(med[low]), "q_at": float(centres[low]), "left": float(med[first]),
-            "q_left": float(centres[first]), "right": float(med[last]), "q_right": float(centres[last])}
+    tested = 0
+    for a, b, direction in monotone_stretches(q):
+        if b - a < MIN_STRETCH_POINTS:
+            continue
+        tested += 1
+        x, y = direction * q[a:b + 1], c[a:b + 1]
+        order = np.argsort(x, kind="stable")[::_stride(b + 1 - a, EDGE_TEST_POINTS)]
+        if fit_piecewise(x[order], y[order], max_pieces=2).knots:
+            return True, tested
+    return False, tested
 
 
 # --------------------------------------------------------------------------------------------
@@ -289,16 +219,16 @@ def _time_problems(t: np.ndarray, linenos: np.ndarray) -> tuple[list[Problem], f
 
 def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) -> list[Problem]:
     """The physical checks of knob ``k`` (its angle moves)."""
+    from .signal.reading import detect_sign
+    from .signal.stretches import find_reversals
+
     out: list[Problem] = []
     q_name, y_name, c_name = f"q{k}", f"y{k}", f"c{k}"
     q_all = cols[q_name]
     ok = np.isfinite(q_all)
     q = q_all[ok]
     span = robust_range(q)
-    stride = _stride(q.size, 20000)  # reversals are slow events: a thinned angle shows them all
-    band = max(MIN_SIGNAL_TO_NOISE * noise(q), 0.01 * span)
-    turns = [i * stride for i in turning_points(q[::stride], band)]
-    if not turns:
+    if find_reversals(q)[0].size == 0:
         out.append(Problem(WARNING, q_name, f"knob {k} never reverses (one way, {float(q[0]):+.1f} to "
                                             f"{float(q[-1]):+.1f} deg): identify needs it to go back and forth "
                                             "to see the backlash (a detect-shift replay need not)"))
@@ -307,9 +237,9 @@ def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) ->
         if y.size >= MIN_ROWS:
             sigma, rng = noise(y), robust_range(y)
             if not rng > MIN_SIGNAL_TO_NOISE * sigma:
-                out.append(Problem(WARNING, y_name, f"the tip never moves: its range {rng:.3g} deg is "
-                                                    f"{'no more than its noise' if sigma == 0 else f'{rng / sigma:.1f} x its noise {sigma:.2g} deg'}"
-                                                    f" while knob {k} spans {span:.3g} deg (a tip sensor not "
+                versus = "no more than its noise" if sigma == 0 else f"{rng / sigma:.1f} x its noise {sigma:.2g} deg"
+                out.append(Problem(WARNING, y_name, f"the tip never moves: its range {rng:.3g} deg is {versus} "
+                                                    f"while knob {k} spans {span:.3g} deg (a tip sensor not "
                                                     "connected?); identify --current-only ignores the tip"))
     if c_name not in cols:
         out.append(Problem(WARNING, c_name, f"no motor current {c_name} for knob {k}: detect-shift and identify "
@@ -319,27 +249,21 @@ def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) ->
     q, c = q_all[both], cols[c_name][both]
     if q.size < MIN_ROWS:
         return out
-    if current_sign == "signed":
-        v = magnitude_only(q, c)
-        if v is not None:
-            out.append(Problem(ERROR, c_name, f"the current never goes below its no-load level: lowest "
-                                              f"({v['level']:.4g} mA) at q{k} ~ {v['q_at']:+.1f} deg, rising to "
-                                              f"{v['left']:.4g} mA at {v['q_left']:+.1f} deg and {v['right']:.4g} mA "
-                                              f"at {v['q_right']:+.1f} deg. A signed current falls below it past "
-                                              "the negative edge: this drive reports |I|, and --current-sign "
-                                              "magnitude is the option for such drives"))
-    bounds = [0] + [t for t in turns if 0 < t < q.size] + [q.size]
-    gains = []
-    for a, b in zip(bounds[:-1], bounds[1:]):
-        if b - a >= MIN_STRETCH_POINTS:
-            s = _stride(b - a, EDGE_TEST_POINTS)
-            gains.append(slope_change(q[a:b:s], c[a:b:s]))
-    if gains and max(gains) < MIN_DELTA_BIC:
+    if current_sign != "magnitude" and detect_sign(q, c, np.sign(np.gradient(q)))[0] == "magnitude":
+        said = ("you said it is signed: it is not, and identify --current-sign signed would read the "
+                "negative tendon's take-up as the positive one's" if current_sign == "signed" else
+                "identify reads it so (--current-sign auto); --current-sign magnitude is the option for such "
+                "drives")
+        out.append(Problem(ERROR if current_sign == "signed" else WARNING, c_name,
+                           "the current never goes below its no-load level: it dips inside the swept range and "
+                           "rises from there both ways, as a magnitude |I| does (a signed current falls below "
+                           f"it past the negative edge); {said}"))
+    passes, tested = passes_an_edge(q, c)
+    if tested and not passes:
         out.append(Problem(WARNING, c_name, f"the sweep never passes a dead-zone edge: the current's slope does "
-                                            f"not change along knob {k} on any of {len(gains)} one-way stretch(es) "
-                                            f"(best BIC gain of a two-piece line {max(gains):.1f} < "
-                                            f"{MIN_DELTA_BIC:g}): sweep further, or the current does not follow "
-                                            "the tendons"))
+                                            f"not change along knob {k} on any of {tested} one-way stretch(es) "
+                                            "(a broken line of two pieces never beats one line by BIC): sweep "
+                                            "further, or the current does not follow the tendons"))
     return out
 
 
@@ -374,7 +298,7 @@ def require_shape(run: Run) -> Run:
     return run
 
 
-def check_run(run: Run, current_sign: str = "signed") -> tuple[Problem, ...]:
+def check_run(run: Run, current_sign: str = "auto") -> tuple[Problem, ...]:
     """The metadata, time and physical checks of a run already read (see the module docstring);
     a line number in a message counts data rows from 1."""
     time = _time_problems(run.t, np.arange(1, len(run) + 1))[0] if "t" in run else []
@@ -455,7 +379,7 @@ def _read_text(path: Path) -> tuple[str | None, list[Problem]]:
     return text, out
 
 
-def check_file(path: str | os.PathLike, columns: object = None, current_sign: str = "signed") -> CheckReport:
+def check_file(path: str | os.PathLike, columns: object = None, current_sign: str = "auto") -> CheckReport:
     """Every problem of one run CSV, or of a user's own CSV read through ``columns``.
 
     Parameters
@@ -465,8 +389,10 @@ def check_file(path: str | os.PathLike, columns: object = None, current_sign: st
         A ``--columns`` mapping (:func:`hystcli.importer.columns_mapping`): the file may then use
         any separator and its own column names and units. Without one the file must be a run CSV:
         comma-separated, ``# key: value`` metadata lines, a header row of run column names.
-    current_sign : {"signed", "magnitude"}
-        ``magnitude``: the drive reports ``|I|`` (the magnitude check is left out).
+    current_sign : {"auto", "signed", "magnitude"}
+        What the user says of the current (:data:`hystcli.settings.CURRENT_SIGNS`): a magnitude
+        found is a warning under ``auto``, an error under ``signed``, and not looked for under
+        ``magnitude``.
 
     Returns
     -------
@@ -579,6 +505,5 @@ def _strip(message: str, source: str) -> str:
     return message[len(prefix):] if message.startswith(prefix) else message
 
 
-__all__ = ["CURRENT_SIGNS", "CheckReport", "ERROR", "LEVELS", "Problem", "WARNING", "check_file", "check_run",
-           "magnitude_only", "noise", "require_shape", "robust_range", "shape_message", "slope_change",
-           "turning_points"]
+__all__ = ["CheckReport", "ERROR", "LEVELS", "Problem", "WARNING", "check_file", "check_run", "noise",
+           "passes_an_edge", "require_shape", "robust_range", "shape_message"]

@@ -237,6 +237,14 @@ def command(name: str, summary: str, **kwargs: Any) -> Callable:
 # --------------------------------------------------------------------------------------------
 # shared options (house rule 7: declared once)
 # --------------------------------------------------------------------------------------------
+class CurrentSign(str, Enum):
+    """How a drive reports its motor current (:data:`hystcli.settings.CURRENT_SIGNS`)."""
+
+    auto = "auto"
+    signed = "signed"
+    magnitude = "magnitude"
+
+
 class OutputFormat(str, Enum):
     table = "table"
     json = "json"

@@ -2,19 +2,13 @@
 rendered, one line each, and the exit code says whether any is an error)."""
 from __future__ import annotations
 
-from enum import Enum
 from pathlib import Path
 from typing import Annotated, List
 
 import typer
 
-from .app import (ColumnsOpt, FormatOpt, OutputFormat, columns_mapping, command, distinct_inputs,
+from .app import (ColumnsOpt, CurrentSign, FormatOpt, OutputFormat, columns_mapping, command, distinct_inputs,
                   echo_json, echo_table)
-
-
-class CurrentSign(str, Enum):
-    signed = "signed"
-    magnitude = "magnitude"
 
 
 @command(
@@ -36,9 +30,10 @@ def check_cmd(
     runs: Annotated[List[Path], typer.Argument(metavar="RUN.csv", help="Run CSVs to check.", show_default=False)],
     columns: ColumnsOpt = None,
     current_sign: Annotated[CurrentSign, typer.Option(
-        "--current-sign", help="How the drive reports its motor current: signed (below the no-load level "
-                               "for the other tendon), or its magnitude |I| (that check is left out).")
-    ] = CurrentSign.signed,
+        "--current-sign", help="How the drive reports its motor current, as you would tell identify: auto (a "
+                               "magnitude found is a warning), signed (it is an error) or magnitude (not looked "
+                               "for).")
+    ] = CurrentSign.auto,
     fmt: FormatOpt = OutputFormat.table,
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print the errors only (not the warnings, "
                                                               "not the files without a problem).")] = False,

@@ -2,27 +2,18 @@
 from __future__ import annotations
 
 import math
-from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .app import (ColumnsOpt, FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about,
+from .app import (ColumnsOpt, CurrentSign, FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about,
                   columns_mapping, command, distinct_outputs, echo_json, echo_table, info, load_run, one_of,
                   option_errors, prints, usage_error, warn)
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, TravelLimitOpt, limit_hint, limits)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
-
-
-class CurrentSign(str, Enum):
-    """How a drive reports its motor current (:data:`hystcli.settings.CURRENT_SIGNS`)."""
-
-    auto = "auto"
-    signed = "signed"
-    magnitude = "magnitude"
 
 
 @command("identify", "Identify each knob's hysteresis model from a sweep",
