@@ -143,13 +143,13 @@ class CheckReport:
 def noise(x: np.ndarray) -> float:
     """Standard deviation of white noise on ``x``, from its second differences.
 
-    The median absolute deviation of ``x[i+1] - 2 x[i] + x[i-1]`` (variance 6 sigma^2 for white
-    noise) over 0.6745: a smooth motion adds little to second differences, outliers nothing.
+    The robust scale (:func:`hystcli.signal.pwl.robust_scale`) of ``x[i+1] - 2 x[i] + x[i-1]``,
+    whose variance is 6 sigma^2 for white noise: a smooth motion adds little to second
+    differences, outliers nothing.
     """
-    d2 = np.diff(np.asarray(x, dtype=float), 2)
-    if d2.size == 0:
-        return 0.0
-    return float(np.median(np.abs(d2 - np.median(d2))) / 0.6745 / math.sqrt(6.0))
+    from .signal.pwl import robust_scale
+
+    return robust_scale(np.diff(np.asarray(x, dtype=float), 2)) / math.sqrt(6.0)
 
 
 def robust_range(x: np.ndarray) -> float:
