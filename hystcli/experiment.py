@@ -453,7 +453,7 @@ class ShiftRow:
                 "shape": self.shape, "offset": r.offset, "true_offset": self.true_offset,
                 "error": self.error, "edge": r.edge, "edge_found_at": r.edge_found_at,
                 "true_edge": self.true_edge, "edge_error": self.edge_error,
-                "transition": r.transition, "start_outside": r.start_outside,
+                "offset_lo": r.offset_lo, "offset_hi": r.offset_hi, "start_outside": r.start_outside,
                 "travel": r.travel, "steps": r.steps}
 
 
@@ -942,17 +942,18 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
 
 def shift_table(result: ExperimentResult) -> metrics.Table:
     """Algorithm 1 per catheter, scenario and knob: detected and true offsets."""
-    cols = ("catheter", "scenario", "knob", "offset", "true_offset", "error", "edge", "edge_found_at",
-            "true_edge", "edge_error", "travel")
-    heads = ("catheter", "scenario", "knob", "offset", "true offset", "error", "edge", "found at",
+    cols = ("catheter", "scenario", "knob", "offset", "offset_lo", "offset_hi", "true_offset", "error", "edge",
+            "edge_found_at", "true_edge", "edge_error", "travel")
+    heads = ("catheter", "scenario", "knob", "offset", "low", "high", "true offset", "error", "edge", "found at",
              "true edge", "edge error", "travel")
-    rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.true_offset, s.error,
-                  f"{s.result.edge} ({s.result.transition})", s.result.edge_found_at, s.true_edge,
+    rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.result.offset_lo, s.result.offset_hi,
+                  s.true_offset, s.error, s.result.edge, s.result.edge_found_at, s.true_edge,
                   s.edge_error, s.result.travel) for s in result.shifts)
     return metrics.Table(cols, heads, rows, (
         "Algorithm 1 on the replays",
-        "deg; error = detected - true offset; edge error = found - true edge (the search's own error: "
-        "the offset also carries the identified model's error in D, offset = edge - D)"), keys=3)
+        "deg; low/high: the offset's 95 % interval; error = detected - true offset; edge error = found - true "
+        "edge (the search's own error; the offset is measured from where the sweep's current took the same "
+        "tendon up)"), keys=3)
 
 
 def _section(table: metrics.Table, fmt: str) -> str:
