@@ -63,6 +63,7 @@ from .errors import DataError
 from .identify import identify
 from .io import Run, all_or_none, read_run
 from .model import PAPER_OMEGA, Model, Shape
+from .errors import ShiftDetectionError
 from .shift import ReplayProbe, ShiftResult, detect_shift
 from .twin import VirtualCatheter, nonperiodic, periodic, simulate, simulate_motion, sweep
 
@@ -422,7 +423,9 @@ class ShiftRow:
     shape : str
     true_offset : float or None
         From the replay's ``true_offset<k>`` metadata (deg).
-    result : ShiftResult
+    result : ShiftResult or None
+        None where Algorithm 1 refused (``refused`` says why): the comp+shift runs then apply no
+        shift on that knob (Compensation-Only), as a robot whose search refused would.
     true_edge : float or None
         Where the twin really has the edge the search found (deg): the true offset plus the
         catheter's true ``d_pos`` or ``d_neg``.
@@ -433,22 +436,30 @@ class ShiftRow:
     knob: int
     shape: str
     true_offset: float | None
-    result: ShiftResult
+    result: ShiftResult | None
     true_edge: float | None = None
+    refused: str | None = None
 
     @property
     def error(self) -> float | None:
         """Detected minus true offset (deg): the search's error plus the identification's error
         in the edge it measures from (``offset = edge - D`` of the identified model)."""
-        return None if self.true_offset is None else self.result.offset - self.true_offset
+        if self.true_offset is None or self.result is None:
+            return None
+        return self.result.offset - self.true_offset
 
     @property
     def edge_error(self) -> float | None:
         """Found minus true edge (deg): the search's own error, whatever the identified D."""
-        return None if self.true_edge is None else self.result.edge_found_at - self.true_edge
+        if self.true_edge is None or self.result is None:
+            return None
+        return self.result.edge_found_at - self.true_edge
 
     def to_dict(self) -> dict:
         r = self.result
+        if r is None:
+            return {"catheter": self.catheter, "scenario": self.scenario, "knob": self.knob, "shape": self.shape,
+                    "true_offset": self.true_offset, "refused": self.refused}
         return {"catheter": self.catheter, "scenario": self.scenario, "knob": self.knob,
                 "shape": self.shape, "offset": r.offset, "true_offset": self.true_offset,
                 "error": self.error, "edge": r.edge, "edge_found_at": r.edge_found_at,
@@ -764,10 +775,17 @@ def _run_protocol(catheters, trials, seed, data_dir, progress, scenarios, durati
             detected[cat.name, s.name] = offsets
             for k in KNOBS:
                 replay = source.replay(cat, s, k)
-                res = detect_shift(model, ReplayProbe(replay, k), k, step=DETECT_STEP,
-                                   max_travel=DETECT_MAX_TRAVEL)
                 true = replay.meta.get(f"true_offset{k}")
                 true = None if true is None else float(true)
+                try:
+                    res = detect_shift(model, ReplayProbe(replay, k), k, step=DETECT_STEP,
+                                       max_travel=DETECT_MAX_TRAVEL)
+                except ShiftDetectionError as exc:
+                    # a robot whose search refuses applies no shift on that knob
+                    shifts.append(ShiftRow(cat.name, s.name, k, str(s.shape(k)), true, None, None, str(exc)))
+                    offsets[k] = 0.0
+                    tick(f"{cat.name} {s.name}: knob {k} shift refused")
+                    continue
                 d_true = cat.knobs[k].d_pos if res.edge == "pos" else cat.knobs[k].d_neg
                 shifts.append(ShiftRow(cat.name, s.name, k, str(s.shape(k)), true, res,
                                        None if true is None else true + d_true))
@@ -948,7 +966,9 @@ def shift_table(result: ExperimentResult) -> metrics.Table:
              "true edge", "edge error", "travel")
     rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.result.offset_lo, s.result.offset_hi,
                   s.true_offset, s.error, s.result.edge, s.result.edge_found_at, s.true_edge,
-                  s.edge_error, s.result.travel) for s in result.shifts)
+                  s.edge_error, s.result.travel) if s.result is not None else
+                 (s.catheter, s.scenario, s.knob, None, None, None, s.true_offset, None, "refused", None, None, None,
+                  None) for s in result.shifts)
     return metrics.Table(cols, heads, rows, (
         "Algorithm 1 on the replays",
         "deg; low/high: the offset's 95 % interval; error = detected - true offset; edge error = found - true "

@@ -54,8 +54,9 @@ DEFAULT_MAX_TRAVEL = 25.0
 MIN_READINGS = 5
 """Fewest readings since the last turn before the search reads them (a broken line needs them)."""
 
-MAX_REFINE = 16
-"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel)."""
+MAX_REFINE = 40
+"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel: the
+contact slope and the travel limit stop it sooner)."""
 
 
 @dataclass(frozen=True)
@@ -354,8 +355,9 @@ class _Search:
 
     def _refine(self, edge: _Edge) -> _Edge:
         """More readings past the edge until its offset is known well enough or the search can go
-        no further (a contact, a limit, the budget)."""
-        best = edge
+        no further (a contact, a limit, the budget); each time the edge is placed again on every
+        sample the probe keeps (:meth:`_read_record`), or on the readings."""
+        best = self._read_record(edge)
         for _ in range(MAX_REFINE):
             if _offset_halfwidth(best, self.ref) <= self.settings.max_offset_halfwidth:
                 break
@@ -368,8 +370,8 @@ class _Search:
                 break
             got, _ = self._read_segment()
             if got is not None and got.direction == edge.direction:
-                best = got
-        return self._read_record(best)
+                best = self._read_record(got)
+        return best
 
     def _read_record(self, edge: _Edge) -> _Edge:
         """The edge placed again on every sample the probe passed since the last turn, where the
