@@ -72,6 +72,8 @@ class Reference:
     eps_upper: float | None
     ripple: Any = None
     at_rest_spread: float = 0.0
+    dead_slope: float = 0.0
+    noise: float = 0.0
 
 
 def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN202
@@ -124,8 +126,10 @@ def reference_of(model: Model, knob: int, settings: Settings = DEFAULT, *,
         ripple = ident.ripple
     if eps_upper is None and slope > 0:
         eps_upper = settings.contact_factor * slope
+    dead = 0.0 if ident is None else float(ident.slope_dead_zone)
+    noise = 0.0 if ident is None or ident.current_noise is None else float(ident.current_noise)
     return Reference(sign=sign, edges=edges, kinds=kinds, why_not=why, edge_level=levels, slope_loaded=slope,
-                     eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
+                     dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
 
 
 def default_max_travel(model: Model, knob: int) -> float:
@@ -239,9 +243,15 @@ class _Search:
 
     # -- level tests ------------------------------------------------------------------------
     def _band(self, noise: float) -> float:
-        """How far from the sweep's take-up level a take-up may read (mA)."""
+        """How far from the sweep's take-up level a take-up may read (mA).
+
+        A bend moves the take-up along the knob, not the current it happens at: the readings'
+        noise and the sweep's (at the settings' level), the dead zone's own tilt over the widest
+        gap allowed between two readings of one edge, and, for readings taken at rest, the span of
+        the motor's static friction between the two directions' levels."""
         spread = self.ref.at_rest_spread if self.at_rest else 0.0
-        return self.z * noise + self.ref.slope_loaded * self.settings.max_edge_gap + spread
+        return (self.z * math.hypot(noise, self.ref.noise) + abs(self.ref.dead_slope) * self.settings.max_edge_gap
+                + spread)
 
     def _load(self, c: float, d: int) -> float:
         return orientation(self.ref.sign, d) * c
