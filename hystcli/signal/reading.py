@@ -246,12 +246,12 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
     """(dead piece, edge knot, hold knot) of one stretch, read in load coordinates.
 
     Returns ``(dead, edge, hold)`` (the edge is the knot ending the dead piece; None where absent).
-    The dead zone is the last piece that every later piece climbs faster than (by ``z`` standard
-    errors of the difference, against the piece's own slope either way) and where the slope
-    bottoms out (the piece before it, if any, is steeper either way): past the take-up the tendon
-    ahead only loads further (a stiffening, a wall are steeper again, and not a bottom), whatever
-    the friction does as the knob slows for its reversal; a held load and its unloading, or a
-    magnitude's fall, come before it. The edge is the knot that
+    The dead zone is a piece that every later piece climbs faster than (by ``z`` standard errors of
+    the difference, against the piece's own slope either way): past the take-up the tendon ahead
+    only loads further, whatever the friction does as the knob slows for its reversal; a held
+    load and its unloading, or a magnitude's fall, come before it. Of such pieces the last, or an
+    earlier one where the slopes only rise between the two (a take-up, a stiffening, a wall: one
+    ascent). The edge is the knot that
     ends the dead piece. A held plateau is a piece before the dead one, as flat as it, that a
     significant rise (the unloading) ends.
     """
@@ -265,16 +265,22 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
     def steeper(j: int, i: int) -> bool:
         return bool(slopes[j] - slopes[i] > z * math.hypot(se[i], se[j]))
 
-    # pieces every later piece climbs significantly faster than (the tendon ahead loading); of
-    # them the last where the slope bottoms out: a wall or a stiffening past the take-up is
-    # steeper again, a held load and its unloading come before
-    def dead_zone_like(m: int) -> bool:
-        later = all(slopes[j] - abs(slopes[m]) > z * math.hypot(se[m], se[j]) for j in range(m + 1, k + 1))
-        bottom = m == 0 or abs(slopes[m - 1]) - abs(slopes[m]) > z * math.hypot(se[m - 1], se[m])
-        return later and bottom
+    # pieces every later piece climbs significantly faster than (the tendon ahead loading, against
+    # the piece's own slope either way); of them the last, taken back to an earlier one where the
+    # slopes only rise between the two (a take-up, then a stiffening or a wall: one ascent),
+    # not where they fall (a held load's unloading into the dead zone lies between)
+    def later_steeper(m: int) -> bool:
+        return all(slopes[j] - abs(slopes[m]) > z * math.hypot(se[m], se[j]) for j in range(m + 1, k + 1))
 
-    cands = [m for m in range(k) if dead_zone_like(m)]
+    def ascending(a: int, b: int) -> bool:
+        return all(slopes[i + 1] >= slopes[i] - z * math.hypot(se[i], se[i + 1]) for i in range(a, b))
+
+    cands = [m for m in range(k) if later_steeper(m)]
     dead = cands[-1] if cands else None
+    for m in reversed(cands[:-1]):
+        if not ascending(m, dead):
+            break
+        dead = m
     # the held plateau: a piece before the dead zone that a significant rise (the unloading) ends,
     # and whose slope lies nearer the dead zone's (or level, in a stretch that ends before its
     # take-up) than the unloading's: a held load, not a bend in the unloading
@@ -517,7 +523,8 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     edge_level: dict[str, float] = {}
     dead_slopes = []
     for side, d in (("pos", 1), ("neg", -1)):
-        seen = _confirmed([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
+        seen = _confirmed(_at_no_load([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
+                                      sign, z, settings.max_edge_gap),
                           [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
         # the record's first stretch starts from a state the record cannot tell (a tip held above
         # its plateau is taken up early): it stands in only where no other shows the edge, and
@@ -611,6 +618,30 @@ def _confirmed(mine: list[StretchReading], other: list[StretchReading]) -> list[
         return mine
     ok = [s for s in mine if any(min(_dead_span(s)[1], b) >= max(_dead_span(s)[0], a) for a, b in spans)]
     return ok or mine
+
+
+def _edge_load(s: StretchReading, sign: str) -> float:
+    """The current at a stretch's take-up knot, in load coordinates."""
+    x = s.fit.data[0]
+    return orientation(sign, s.direction) * float(np.interp(s.fit.knots[s.edge], x, s.fit.fitted()))
+
+
+def _at_no_load(mine: list[StretchReading], sign: str, z: float, gap: float) -> list[StretchReading]:
+    """The stretches whose take-up happens at the no-load level.
+
+    In load coordinates a tendon still held behind (a load held after a reversal) reads below the
+    dead zone's level for a signed current and above it for a magnitude; a take-up starts from the
+    dead zone. Of one direction's candidates the highest (signed) or lowest (magnitude) level is
+    the dead zone's, and a candidate farther from it than the readings' noise (at the level ``z``)
+    and the dead zone's tilt over ``gap`` deg is a held load's end, not a take-up."""
+    if len(mine) < 2:
+        return mine
+    levels = np.array([_edge_load(s, sign) for s in mine])
+    ref = float(levels.max() if sign == "signed" else levels.min())
+    noise = max(s.fit.scale / math.sqrt(max(float(np.median(s.fit.data[2] ** 2)), 1e-12)) for s in mine)
+    tilt = max(abs(float(s.fit.slopes[s.dead])) for s in mine) * gap
+    band = z * math.sqrt(2.0) * noise + tilt
+    return [s for s, lv in zip(mine, levels) if abs(lv - ref) <= band]
 
 
 def _noise(q, c, stretches) -> float:  # noqa: ANN001
