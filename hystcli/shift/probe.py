@@ -119,6 +119,7 @@ class ReplayProbe:
         self._unit = None    # the last step length, the averaging span
         self.start = self._pos
         self.reads_moving = True
+        self.detoured = False
         moves = np.flatnonzero(np.abs(self._q - self._q[0]) > 1e-9)
         # the way the record itself goes first: a search that starts that way need not walk the
         # record through its own turn
@@ -160,7 +161,11 @@ class ReplayProbe:
         c_end = self._c[j] + frac * (self._c[j + 1] - self._c[j])
         tip_end = None if self._y is None else float(self._y[j] + frac * (self._y[j + 1] - self._y[j]))
         unit = abs(target - self._pos)
+        before = self.recorded_travel
         self._i, self._frac, self._pos = j, float(frac), target
+        # the record went elsewhere and came back (its own turn) between the two positions: the
+        # state the knob reached here is not the one the last reading left
+        self.detoured = self.recorded_travel - before > 1.5 * unit + 1e-9
         if not self.average:
             return ProbeSample(target, float(c_end), tip_end)
         # the samples the knob passed during the last unit step of its monotone approach to q

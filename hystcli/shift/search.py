@@ -74,6 +74,7 @@ class Reference:
     at_rest_spread: float = 0.0
     dead_slope: float = 0.0
     noise: float = 0.0
+    current_range: tuple = (None, None)
 
 
 def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN202
@@ -128,22 +129,25 @@ def reference_of(model: Model, knob: int, settings: Settings = DEFAULT, *,
         eps_upper = settings.contact_factor * slope
     dead = 0.0 if ident is None else float(ident.slope_dead_zone)
     noise = 0.0 if ident is None or ident.current_noise is None else float(ident.current_noise)
+    crange = (None, None) if ident is None else (ident.current_min, ident.current_max)
     return Reference(sign=sign, edges=edges, kinds=kinds, why_not=why, edge_level=levels, slope_loaded=slope,
-                     dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
+                     dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread,
+                     current_range=crange)
 
 
 def default_max_travel(model: Model, knob: int) -> float:
     """The travel limit of a search when none is given (deg of knob).
 
-    The largest ``|q|`` of the identification sweep plus half the dead zone's width: a search that
-    starts with a tendon taut crosses the whole dead zone to the far edge, so in the tendons' own
-    terms it never drives the knob beyond what the sweep already did; :data:`DEFAULT_MAX_TRAVEL`
-    when the model has no identification.
+    Twice the largest ``|q|`` of the identification sweep plus half the dead zone's width: a bend
+    moves the edges by up to the knob's own reach, and a search that starts with a tendon taut
+    crosses the whole dead zone to the far edge. What keeps the tendons safe is the current: the
+    search loads no tendon beyond what the sweep did (:meth:`_Search._advance`);
+    :data:`DEFAULT_MAX_TRAVEL` when the model has no identification.
     """
     ident = model.identification.get(int(knob)) if model.identification else None
     if ident is None:
         return DEFAULT_MAX_TRAVEL
-    reach = max(abs(float(ident.q_min)), abs(float(ident.q_max)))
+    reach = 2.0 * max(abs(float(ident.q_min)), abs(float(ident.q_max)))
     km = model.knob(int(knob))
     reach += 0.5 * max(km.d_pos - km.d_neg, 0.0)
     return reach if math.isfinite(reach) and reach > 0 else DEFAULT_MAX_TRAVEL
@@ -233,7 +237,25 @@ class _Search:
             raise _Limit(str(exc)) from None
         self.steps += 1
         self.travel += self.step
+        self._within_sweep_load(s)
+        if getattr(self.probe, "detoured", False):
+            # the record took its own turn to get here: the readings before belong to another
+            # pass of the knob, so the stretch starts afresh
+            self.seg_q, self.seg_c = [], []
+            self.seg_mark = max(getattr(self.probe, "mark", 1) - 1, 0)
         self._record(s)
+
+    def _within_sweep_load(self, s: ProbeSample) -> None:
+        """A step that takes the current further past the sweep's range (by more than the readings'
+        noise) loads a tendon beyond what the sweep did: the search goes no further that way. (A
+        bend may leave a tendon loaded more than that at the start; unloading it is allowed.)"""
+        lo, hi = self.ref.current_range
+        if lo is None or hi is None or not self.seg_c:
+            return
+        c, before = self._reading(s), self.seg_c[-1]
+        margin = self.z * max(self.ref.noise, 1e-9) * 3.0
+        if (c > hi + margin and c > before) or (c < lo - margin and c < before):
+            raise _Limit(f"the current the sweep loaded the tendons to ({lo:.1f} .. {hi:.1f}; read {c:.1f})")
 
     def _turn(self) -> None:
         self.direction = -self.direction
@@ -476,6 +498,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     k = int(knob)
     km = model.knob(k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
+    user_direction = direction is not None
     if direction is None:
         direction = int(getattr(probe, "first_direction", 1))
     max_travel = default_max_travel(model, k) if max_travel is None else float(max_travel)
@@ -485,7 +508,7 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
                                   + "; ".join(ref.why_not[d] for d in (1, -1) if ref.why_not[d]))
     if max_steps is None:
         max_steps = 3 * int(math.ceil(max_travel / step - 1e-9)) + 2 * MIN_READINGS
-    if direction not in ref.edges:
+    if direction not in ref.edges and not hasattr(probe, "first_direction") and not user_direction:
         direction = -direction
     search = _Search(probe, ref, settings, float(step), int(max_steps), max_travel, int(direction), progress)
     start = search.start

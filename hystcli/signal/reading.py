@@ -129,6 +129,9 @@ class CurrentReading:
         the take-up along the knob, not this level.
     noise : float
         Per-sample noise of the conditioned current about the broken lines.
+    current_range : tuple of float
+        The lowest and highest conditioned current of the record: the most the sweep loaded each
+        tendon.
     ripple : Ripple or None
         The cogging ripple taken out before the stretches were read.
     stretches : tuple of StretchReading
@@ -146,6 +149,7 @@ class CurrentReading:
     noise: float
     ripple: Ripple | None = None
     stretches: tuple[StretchReading, ...] = field(default=(), repr=False)
+    current_range: tuple[float, float] = (math.nan, math.nan)
 
     def orient(self, direction: int) -> int:
         """The factor that turns a current into load coordinates on a stretch going ``direction``."""
@@ -593,7 +597,7 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     return CurrentReading(sign=sign, sign_note=sign_note, edges=edges, backlash=backlash, notes=notes,
                           no_load=no_load, dead_slope=float(np.median(dead_slopes)) if dead_slopes else 0.0,
                           loaded_slope=loaded_slope, edge_level=edge_level, noise=noise, ripple=ripple,
-                          stretches=tuple(stretches))
+                          stretches=tuple(stretches), current_range=(float(np.min(c)), float(np.max(c))))
 
 
 def _dead_span(s: StretchReading) -> tuple[float, float]:
