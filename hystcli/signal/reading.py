@@ -525,79 +525,98 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     no_load: dict[int, float] = {}
     loaded_slope: dict[str, float] = {}
     edge_level: dict[str, float] = {}
-    dead_slopes = []
+    dead_slopes: list[float] = []
     for side, d in (("pos", 1), ("neg", -1)):
-        seen = _confirmed(_at_no_load([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
-                                      sign, z, settings.max_edge_gap),
-                          [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
-        # the record's first stretch starts from a state the record cannot tell (a tip held above
-        # its plateau is taken up early): it stands in only where no other shows the edge, and
-        # then fixes nothing
-        mine = [s for s in seen if s.from_reversal] or seen
-        first_only = bool(mine) and not mine[0].from_reversal
-        if not mine:
+        mine = _take_up_stretches(stretches, d, sign, z, settings)
+        got = _side_edge(mine, side, d, sign, z, settings)
+        if got is None:
             notes[f"d_{side}"] = (f"no stretch of the record takes the {'positive' if d > 0 else 'negative'} "
                                   "tendon up from the dead zone (the current never steepens past a flat "
                                   "stretch that way): sweep further that way")
         else:
-            v, lo, hi, p = combine([s.edge_at for s in mine], [s.edge_lo for s in mine],
-                                   [s.edge_hi for s in mine], z, settings.level)
-            closed = math.isfinite(lo) and math.isfinite(hi)
-            reason = None
-            if not closed:
-                reason = "the current's take-up is seen too close to where the stretches end"
-            if first_only:
-                closed, reason = False, ("only the record's first stretch shows the take-up, from a start state "
-                                         "the record cannot tell: sweep a whole cycle past that edge")
-            elif closed and max(v - lo, hi - v) > settings.max_fixed_halfwidth:
-                closed, reason = False, (f"the current places the take-up only to [{lo:.2f}, {hi:.2f}] deg "
-                                         + ("(its stretches disagree)" if p < 1.0 - settings.level else ""))
-            edges[side] = Estimate(v, lo, hi, settings.level, closed, reason)
-            if p < 1.0 - settings.level and len(mine) > 1:
-                notes[f"d_{side}"] = (f"the stretches place the take-up differently "
-                                      f"({', '.join(f'{s.edge_at:.2f}' for s in mine)} deg; heterogeneity "
-                                      f"p = {p:.2g}): the interval carries their spread")
-            slopes = [float(orientation(sign, d) * s.fit.slopes[s.edge + 1]) for s in mine]
-            loaded_slope[side] = float(np.median(slopes))
-            edge_level[side] = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted())
-                                                for s in mine]))
-        deads = [s for s in stretches if s.direction == d and s.dead is not None]
-        levels = []
-        for s in deads:
-            x_lo = s.fit.knots[s.dead - 1] if s.dead > 0 else s.fit.data[0][0]
-            x_hi = s.fit.knots[s.dead] if s.dead < s.fit.n_knots else s.fit.data[0][-1]
-            xb = s.fit.data[0]
-            levels.append(float(np.interp(0.5 * (x_lo + x_hi), xb, s.fit.fitted())))
-            dead_slopes.append(float(orientation(sign, d) * s.fit.slopes[s.dead]))
+            edges[side], loaded_slope[side], edge_level[side], note = got
+            if note:
+                notes[f"d_{side}"] = note
+        levels, slopes = _dead_levels([s for s in stretches if s.direction == d and s.dead is not None], sign)
+        dead_slopes += slopes
         if levels:
             no_load[d] = float(np.median(levels))
-        # backlash: shown after the reversal at this side's end, by the stretches going the other way
-        b_side = side
-        after = [s for s in stretches if s.direction == -d and s.after_loaded_reversal]
-        held = [s for s in after if math.isfinite(s.hold)]
-        name = f"b_{b_side}"
-        if held and len(held) == len(after):
-            v, lo, hi, _ = combine([s.hold for s in held], [s.hold_lo for s in held], [s.hold_hi for s in held],
-                                   z, settings.level)
-            lo = max(lo, 0.0)
-            v = max(v, 0.0)
-            sharp = math.isfinite(hi) and max(v - lo, hi - v) <= settings.max_fixed_halfwidth
-            backlash[b_side] = Estimate(v, lo, hi, settings.level, sharp,
-                                        None if sharp else f"the current places the held load's end only to "
-                                                           f"[{lo:.2f}, {hi:.2f}] deg")
-        elif held:
-            notes[name] = (f"{len(held)} of the {len(after)} stretches after a loaded reversal show the load held, "
-                           "the others none: the current does not fix the backlash")
-        elif after:
-            notes[name] = ("after a reversal the current unloads at once (it follows the tendon's stretch, not "
-                           "the tip's load): it does not show the backlash")
+        est, note = _side_backlash([s for s in stretches if s.direction == -d and s.after_loaded_reversal],
+                                   z, settings)
+        if est is not None:
+            backlash[side] = est
         else:
-            notes[name] = "no reversal of the record comes back from a loaded tendon: the backlash is not shown"
+            notes[f"b_{side}"] = note
     noise = _noise(q, c, stretches)
     return CurrentReading(sign=sign, sign_note=sign_note, edges=edges, backlash=backlash, notes=notes,
                           no_load=no_load, dead_slope=float(np.median(dead_slopes)) if dead_slopes else 0.0,
                           loaded_slope=loaded_slope, edge_level=edge_level, noise=noise, ripple=ripple,
                           stretches=tuple(stretches), current_range=(float(np.min(c)), float(np.max(c))))
+
+
+def _take_up_stretches(stretches, d, sign, z, settings) -> list[StretchReading]:  # noqa: ANN001
+    """The stretches of direction ``d`` whose take-up the edge is read from: at the no-load level,
+    over a dead piece the other direction finds slack too, and begun at a reversal (the record's
+    first stretch starts from a state the record cannot tell: a tip held above its plateau is
+    taken up early; it stands in only where no other shows the edge, and then fixes nothing)."""
+    seen = _confirmed(_at_no_load([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
+                                  sign, z, settings.max_edge_gap),
+                      [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
+    return [s for s in seen if s.from_reversal] or seen
+
+
+def _side_edge(mine, side, d, sign, z, settings):  # noqa: ANN001, ANN202
+    """(edge Estimate, loaded slope, current at the take-up, note or None), or None without one."""
+    if not mine:
+        return None
+    v, lo, hi, p = combine([s.edge_at for s in mine], [s.edge_lo for s in mine], [s.edge_hi for s in mine], z,
+                           settings.level)
+    closed = math.isfinite(lo) and math.isfinite(hi)
+    reason = None if closed else "the current's take-up is seen too close to where the stretches end"
+    disagree = p < 1.0 - settings.level and len(mine) > 1
+    if not mine[0].from_reversal:
+        closed, reason = False, ("only the record's first stretch shows the take-up, from a start state "
+                                 "the record cannot tell: sweep a whole cycle past that edge")
+    elif closed and max(v - lo, hi - v) > settings.max_fixed_halfwidth:
+        closed, reason = False, (f"the current places the take-up only to [{lo:.2f}, {hi:.2f}] deg "
+                                 + ("(its stretches disagree)" if disagree else ""))
+    note = (f"the stretches place the take-up differently ({', '.join(f'{s.edge_at:.2f}' for s in mine)} deg; "
+            f"heterogeneity p = {p:.2g}): the interval carries their spread") if disagree else None
+    slope = float(np.median([orientation(sign, d) * s.fit.slopes[s.edge + 1] for s in mine]))
+    level = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted()) for s in mine]))
+    return Estimate(v, lo, hi, settings.level, closed, reason), slope, level, note
+
+
+def _dead_levels(deads, sign) -> tuple[list[float], list[float]]:  # noqa: ANN001
+    """The current at the middle of each dead piece, and each dead piece's slope (load coordinates)."""
+    levels, slopes = [], []
+    for s in deads:
+        x = s.fit.data[0]
+        x_lo = s.fit.knots[s.dead - 1] if s.dead > 0 else x[0]
+        x_hi = s.fit.knots[s.dead] if s.dead < s.fit.n_knots else x[-1]
+        levels.append(float(np.interp(0.5 * (x_lo + x_hi), x, s.fit.fitted())))
+        slopes.append(float(orientation(sign, s.direction) * s.fit.slopes[s.dead]))
+    return levels, slopes
+
+
+def _side_backlash(after, z, settings):  # noqa: ANN001, ANN202
+    """(Estimate, None) of the backlash the stretches after a loaded reversal show held, or
+    (None, why not)."""
+    held = [s for s in after if math.isfinite(s.hold)]
+    if not held:
+        if after:
+            return None, ("after a reversal the current unloads at once (it follows the tendon's stretch, not "
+                          "the tip's load): it does not show the backlash")
+        return None, "no reversal of the record comes back from a loaded tendon: the backlash is not shown"
+    if len(held) < len(after):
+        return None, (f"{len(held)} of the {len(after)} stretches after a loaded reversal show the load held, "
+                      "the others none: the current does not fix the backlash")
+    v, lo, hi, _ = combine([s.hold for s in held], [s.hold_lo for s in held], [s.hold_hi for s in held], z,
+                           settings.level)
+    lo, v = max(lo, 0.0), max(v, 0.0)
+    sharp = math.isfinite(hi) and max(v - lo, hi - v) <= settings.max_fixed_halfwidth
+    return Estimate(v, lo, hi, settings.level, sharp,
+                    None if sharp else f"the current places the held load's end only to [{lo:.2f}, {hi:.2f}] deg"), None
 
 
 def _dead_span(s: StretchReading) -> tuple[float, float]:
