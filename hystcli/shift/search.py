@@ -140,9 +140,9 @@ def default_max_travel(model: Model, knob: int) -> float:
 
     Twice the largest ``|q|`` of the identification sweep plus half the dead zone's width: a bend
     moves the edges by up to the knob's own reach, and a search that starts with a tendon taut
-    crosses the whole dead zone to the far edge. What keeps the tendons safe is the current: the
-    search loads no tendon beyond what the sweep did (:meth:`_Search._advance`);
-    :data:`DEFAULT_MAX_TRAVEL` when the model has no identification.
+    crosses the whole dead zone to the far edge (on a live robot the device's current ceiling and
+    the contact slope stop a search that loads a tendon too far); :data:`DEFAULT_MAX_TRAVEL` when
+    the model has no identification.
     """
     ident = model.identification.get(int(knob)) if model.identification else None
     if ident is None:
@@ -237,25 +237,12 @@ class _Search:
             raise _Limit(str(exc)) from None
         self.steps += 1
         self.travel += self.step
-        self._within_sweep_load(s)
         if getattr(self.probe, "detoured", False):
             # the record took its own turn to get here: the readings before belong to another
             # pass of the knob, so the stretch starts afresh
             self.seg_q, self.seg_c = [], []
             self.seg_mark = max(getattr(self.probe, "mark", 1) - 1, 0)
         self._record(s)
-
-    def _within_sweep_load(self, s: ProbeSample) -> None:
-        """A step that takes the current further past the sweep's range (by more than the readings'
-        noise) loads a tendon beyond what the sweep did: the search goes no further that way. (A
-        bend may leave a tendon loaded more than that at the start; unloading it is allowed.)"""
-        lo, hi = self.ref.current_range
-        if lo is None or hi is None or not self.seg_c:
-            return
-        c, before = self._reading(s), self.seg_c[-1]
-        margin = self.z * max(self.ref.noise, 1e-9) * 3.0
-        if (c > hi + margin and c > before) or (c < lo - margin and c < before):
-            raise _Limit(f"the current the sweep loaded the tendons to ({lo:.1f} .. {hi:.1f}; read {c:.1f})")
 
     def _turn(self) -> None:
         self.direction = -self.direction
