@@ -210,6 +210,12 @@ class ReplayProbe:
         return float(self._path[self._i] + self._frac * (self._path[self._i + 1] - self._path[self._i]))
 
     @property
+    def reach(self) -> float:
+        """How far from where it starts the record takes the knob (deg): every angle it visits
+        was already driven, so a search over it risks nothing the record did not."""
+        return float(np.max(np.abs(self._q - self._q[0])))
+
+    @property
     def mark(self) -> int:
         """Where in the record the walk stands (for :meth:`samples_since`)."""
         return self._i

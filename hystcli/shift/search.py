@@ -466,7 +466,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     step : float
         Unit step :math:`u` (deg).
     max_steps, max_travel : optional
-        Step and travel limits (default: room to cross the dead zone and back; the sweep's reach).
+        Step and travel limits (default: room to cross the dead zone and back; twice the sweep's
+        reach, or a replay's own reach where that is more).
     direction : int, optional
         Initial direction (+1 as in the paper, or -1); default the way a replay's record goes first
         (a search the other way would walk the record through its own turn), else +1.
@@ -488,7 +489,10 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     user_direction = direction is not None
     if direction is None:
         direction = int(getattr(probe, "first_direction", 1))
-    max_travel = default_max_travel(model, k) if max_travel is None else float(max_travel)
+    if max_travel is None:
+        # a replay's record was driven already: its own reach is no risk
+        max_travel = max(default_max_travel(model, k), float(getattr(probe, "reach", 0.0)))
+    max_travel = float(max_travel)
     _check_options(step, max_travel, max_steps, direction)
     if not ref.edges:
         raise ShiftDetectionError(f"knob {k}: no offset can be taken from either side: "
