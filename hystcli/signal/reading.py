@@ -491,7 +491,7 @@ def _fit_stretches(q, c, t, spans, settings, band, ring_s) -> list[Piecewise]:  
 def _ripple(q, spans, fits, sign, z) -> Ripple | None:  # noqa: ANN001
     """The cogging ripple, read on the dead-zone pieces' residuals (where no tendon's load bends the
     current) pooled over the record, where BIC takes it (:func:`.condition.find_ripple`)."""
-    qs, rs, ws, taus = [], [], [], []
+    qs, rs, ws, taus, ds = [], [], [], [], []
     for (a, b, d), fit in zip(spans, fits):
         dead, _, _ = _classify(fit, sign, d, z)
         if dead is None:
@@ -508,14 +508,42 @@ def _ripple(q, spans, fits, sign, z) -> Ripple | None:  # noqa: ANN001
         rs.append(np.clip(r, -lim, lim))
         ws.append(sw[m] ** 2)
         taus.append(fit.tau)
+        ds.append(np.full(int(m.sum()), d))
     if not qs:
         return None
     step = float(np.median(np.abs(np.diff(q)))) if q.size > 1 else 0.01
     spacing = float(np.median(np.concatenate([np.abs(np.diff(x)) for x in qs if x.size > 1]) if qs else [0.0]))
     # a wave shorter than four points' spacing is aliasing, not cogging
-    return find_ripple(np.concatenate(qs), np.concatenate(rs), np.concatenate(ws),
-                       scale=float(np.median([f.scale for f in fits])), tau=float(np.median(taus)),
-                       shortest=max(8.0 * step, 4.0 * spacing, 0.3))
+    qa, ra, wa, da = np.concatenate(qs), np.concatenate(rs), np.concatenate(ws), np.concatenate(ds)
+    scale, tau = float(np.median([f.scale for f in fits])), float(np.median(taus))
+    ripple = find_ripple(qa, ra, wa, scale=scale, tau=tau, shortest=max(8.0 * step, 4.0 * spacing, 0.3))
+    if ripple is None or not _same_both_ways(ripple, qa, ra, wa, da, scale, tau, z):
+        return None
+    return ripple
+
+
+def _same_both_ways(ripple: Ripple, q, r, w, d, scale, tau, z) -> bool:  # noqa: ANN001
+    """Whether each direction of motion shows the ripple on its own, with amplitudes that agree: a
+    motor's cogging is set by its shaft's angle, not by the way it turns, where a wave fitted to a
+    misfit of the broken lines is not (a 2-dof chi-square test of the difference, and each
+    direction's amplitude beyond ``z`` standard errors)."""
+    k = 2.0 * math.pi / ripple.period
+    fits = []
+    for way in (1, -1):
+        m = d == way
+        if m.sum() < 10:
+            return False
+        a = np.column_stack([np.sin(k * q[m]), np.cos(k * q[m])]) * np.sqrt(w[m])[:, None]
+        coef, *_ = np.linalg.lstsq(a, r[m] * np.sqrt(w[m]), rcond=None)
+        cov = np.linalg.pinv(a.T @ a) * scale ** 2 * max(tau, 1.0)
+        fits.append((coef, cov))
+    (c1, v1), (c2, v2) = fits
+    for c, v in fits:
+        if float(c @ np.linalg.pinv(v) @ c) < z * z:
+            return False
+    diff = c1 - c2
+    level = math.erf(z / math.sqrt(2.0))             # the two-sided level z stands for
+    return float(diff @ np.linalg.pinv(v1 + v2) @ diff) <= -2.0 * math.log(1.0 - level)  # chi-square(2)
 
 
 def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> CurrentReading:  # noqa: ANN001
