@@ -305,72 +305,24 @@ def _stretch_points(q, c, t, a, b, d, band_hz, ring_s):  # noqa: ANN001
     return bin_stretch(d * q[a:b + 1][keep], c[a:b + 1][keep], tt[keep], band_hz)
 
 
-def _knot_q(fit: Piecewise, j: int, d: int, chi2: float) -> tuple[float, float, float]:
-    """A knot in knob degrees with its interval."""
+def _knot_q(fit: Piecewise, j: int, d: int, chi2: float, blur: float = 0.0) -> tuple[float, float, float]:
+    """A knot in knob degrees with its interval, each side widened (in quadrature) by ``blur``."""
     lo, hi = knot_interval(fit, j, chi2)
     at = d * fit.knots[j]
     a, b = sorted((d * lo, d * hi))
-    return at, a, b
+    return at, at - math.hypot(at - a, blur), at + math.hypot(b - at, blur)
 
 
-ONSET_WIDTHS = 12
-"""Onset widths the take-up's rounding is searched over (a computation budget), from a sharp
-corner to half the window's travel."""
-
-
-def _onset_basis(x: np.ndarray, e: float, width: float) -> np.ndarray:
-    """A tendon's load taken up at ``e`` over ``width`` deg: 0 before, quadratic across, then
-    linear with unit slope (a sharp hinge when ``width`` is 0)."""
-    u = x - e
-    if width <= 0:
-        return np.maximum(u, 0.0)
-    return np.where(u <= 0, 0.0, np.where(u < width, u * u / (2.0 * width), u - 0.5 * width))
-
-
-def _onset(fit: Piecewise, j: int, chi2: float) -> tuple[float, float, float]:
-    """Where the current departs from the dead zone at knot ``j``, and its profile interval (x units).
-
-    A tendon's take-up need not be a sharp corner: the slack goes out of it over some travel, a
-    low-pass or a lag blurs it. Over the dead piece and the loaded piece either side of the knot,
-    the current is fitted as a line plus a take-up that begins at ``e`` and reaches its full slope
-    over a width the data choose (0: a corner); the profile over ``e`` (the width refitted at
-    each) is the departure's interval, so a rounded or blurred corner widens it by what the data
-    cannot tell, instead of placing the corner's middle with a corner's precision.
-    """
-    x, y, sw, _, u = fit.data
-    kn = np.concatenate([[x[0]], np.asarray(fit.knots), [x[-1]]])
-    lo_x, hi_x = kn[j], kn[j + 2]
-    m = (x >= lo_x) & (x <= hi_x)
-    if m.sum() < 6:
-        lo, hi = knot_interval(fit, j, chi2)
-        return fit.knots[j], lo, hi
-    xx, yy, ww = x[m], y[m], (sw ** 2 * u)[m]
-    sq = np.sqrt(ww)
-    step = max(float(np.median(np.diff(xx))) / 4.0, 1e-6)
-    grid = np.arange(lo_x, hi_x, step)
-    widths = np.concatenate([[0.0], np.geomspace(step, 0.5 * (hi_x - lo_x), ONSET_WIDTHS - 1)])
-    rss = np.full(grid.size, np.inf)
-    for i, e in enumerate(grid):
-        for wd in widths:
-            if e + wd > hi_x:
-                break
-            a = np.column_stack([np.ones_like(xx), xx, _onset_basis(xx, e, wd)]) * sq[:, None]
-            coef, *_ = np.linalg.lstsq(a, yy * sq, rcond=None)
-            r = a @ coef - yy * sq
-            rss[i] = min(rss[i], float(r @ r))
-    rise = (rss - rss.min()) / max(fit.scale, 1e-12) ** 2 / max(fit.tau, 1.0)
-    inside = np.flatnonzero(rise <= chi2)
-    best = float(grid[int(np.argmin(rss))])
-    lo = float(grid[inside[0]]) if inside[0] > 0 else -math.inf
-    hi = float(grid[inside[-1]]) if inside[-1] < grid.size - 1 else math.inf
-    return best, lo, hi
-
-
-def _edge_q(fit: Piecewise, j: int, d: int, chi2: float) -> tuple[float, float, float]:
-    """The departure at knot ``j`` (:func:`_onset`) in knob degrees with its interval."""
-    at, lo, hi = _onset(fit, j, chi2)
-    a, b = sorted((d * lo, d * hi))
-    return d * at, a, b
+def _blur(q: np.ndarray, t: np.ndarray, a: int, b: int, d: int, x_knot: float, band: float | None) -> float:
+    """How far (deg of knob) the low-pass the current was read through spreads a kink: the knob's
+    speed there times the filter's time constant ``1 / (2 pi band)``. No reading places a kink
+    more finely than the filter lets it show, however many samples lie around it."""
+    if not band or b - a < 2:
+        return 0.0
+    x = d * q[a:b + 1]
+    v = np.abs(np.gradient(q[a:b + 1], t[a:b + 1]))
+    order = np.argsort(x, kind="stable")
+    return float(np.interp(x_knot, x[order], v[order])) / (2.0 * math.pi * band)
 
 
 # --------------------------------------------------------------------------------------------
@@ -469,7 +421,7 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, settings: Settings
         dead, edge, hold = _classify(fit, sign, d, z)
         kw: dict = dict(start=a, stop=b, direction=d, fit=fit, dead=dead, edge=None, from_reversal=i > 0)
         if edge is not None:
-            at, lo, hi = _edge_q(fit, edge, d, chi2)
+            at, lo, hi = _knot_q(fit, edge, d, chi2, _blur(q, t, a, b, d, fit.knots[edge], settings.filter_hz))
             kw.update(edge=edge, edge_at=at, edge_lo=lo, edge_hi=hi)
         if hold is not None:
             x_start = d * q[a]
