@@ -421,8 +421,11 @@ def _interval(x, k, prof) -> ParamInterval:
                          lo_open=bool(lo_open), hi_open=bool(hi_open))
 
 
-def _bic(s: float, n: int, p: int) -> float:
-    return n * math.log(max(s, 1e-300) / n) + p * math.log(n)
+def _bic(s: float, n: int, p: int, tau: float = 1.0) -> float:
+    """BIC of an objective s over n residuals with p free parameters; residuals correlated over
+    tau bins carry the information of n / tau independent ones."""
+    ne = n / max(tau, 1.0)
+    return ne * math.log(max(s, 1e-300) / n) + p * math.log(ne)
 
 
 # --------------------------------------------------------------------------------------------
@@ -592,7 +595,18 @@ def _onset(s, w):
 
 
 @njit(cache=True)
-def _unload(x, top, upe, us):
+def _unload(x, xr, pr, phi, delta, upe, us):
+    """Load at x after a reversal at xr with load pr: the friction drop (a fraction phi over a
+    travel delta), held down to upe, then a linear release to zero at us."""
+    at = x if x >= upe else upe
+    frac = 1.0
+    if delta > 0.0:
+        frac = (xr - at) / delta
+        if frac > 1.0:
+            frac = 1.0
+        elif frac < 0.0:
+            frac = 0.0
+    top = pr * (1.0 - phi * frac)
     if x >= upe:
         return top
     if x > us:
@@ -601,20 +615,22 @@ def _unload(x, top, upe, us):
 
 
 @njit(cache=True)
-def _tendon(v, e, lo, beta, gamma, rho, phi, w, v_hist, out):
+def _tendon(v, e, lo, beta, gamma, rho, phi, delta, w, v_hist, out):
     """One tendon's load (knob degrees of stretch) along its own coordinate v (growing as it is
     taken up); returns how often it is taken up from slack within the record.
 
     Loading: ``max(onset(v - e), floor)`` (the floor is the load it held when the knob last
-    turned back toward it). At a reversal at ``x_r`` with load ``P_r`` the load drops to
-    ``(1 - phi) P_r``, holds while the knob travels ``beta`` back, then falls linearly to zero at
+    turned back toward it). At a reversal at ``x_r`` with load ``P_r`` the load drops by a
+    fraction ``phi`` over a travel ``delta`` (the friction flipping), is held while the knob
+    travels ``beta`` back, then falls linearly to zero at
     ``u_s = min(e + gamma, x_r - beta - rho P_r)`` (not below the other tendon's edge ``lo``).
     The history before the record: slack mid dead zone, then to ``v_hist``, then to ``v[0]``.
     """
     mode = 0
     p = 0.0
     floor = 0.0
-    top = 0.0
+    xr = 0.0
+    pr = 0.0
     upe = 0.0
     us = 0.0
     vp = 0.5 * (e + lo)
@@ -625,7 +641,7 @@ def _tendon(v, e, lo, beta, gamma, rho, phi, w, v_hist, out):
         if mode == 0:
             if x < vp and p > 0.0:
                 xr = vp
-                top = p * (1.0 - phi)
+                pr = p
                 us = min(e + gamma, xr - beta - rho * p)
                 if us < lo:
                     us = lo
@@ -635,7 +651,7 @@ def _tendon(v, e, lo, beta, gamma, rho, phi, w, v_hist, out):
                 if upe < us + 1e-6:
                     upe = us + 1e-6
                 mode = 1
-                p = _unload(x, top, upe, us)
+                p = _unload(x, xr, pr, phi, delta, upe, us)
             else:
                 was = p
                 f = _onset(x - e, w)
@@ -649,7 +665,7 @@ def _tendon(v, e, lo, beta, gamma, rho, phi, w, v_hist, out):
                 f = _onset(x - e, w)
                 p = f if f > floor else floor
             else:
-                p = _unload(x, top, upe, us)
+                p = _unload(x, xr, pr, phi, delta, upe, us)
         if i >= 0:
             out[i] = p
         vp = x
@@ -658,7 +674,7 @@ def _tendon(v, e, lo, beta, gamma, rho, phi, w, v_hist, out):
 
 # nonlinear parameters (shared by every variant; held where their term is off)
 _NL = ("e_pos", "e_neg", "beta_pos", "beta_neg", "gamma_pos", "gamma_neg", "rho", "x_h",
-       "phi", "w_pos", "w_neg", "v_eps", "u_wall", "period", "lag", "offset")
+       "phi", "delta", "w_pos", "w_neg", "v_eps", "u_wall", "period", "lag", "offset")
 # linear coefficients (columns of the design matrix)
 _LIN = ("c0", "k_pos", "k_neg", "drift1", "drift2", "coulomb", "viscous", "pre", "s_pos", "s_neg",
         "k_wall", "rip_s", "rip_c", "lf_pos", "lf_neg")
@@ -677,13 +693,13 @@ _TERMS = {
     "wall-": (("u_wall",), ("k_wall",)),
     "ripple": (("period",), ("rip_s", "rip_c")),
     "loadfriction": (("v_eps",), ("lf_pos", "lf_neg")),
-    "drop": (("phi",), ()),
+    "drop": (("phi", "delta"), ()),
     "onset": (("w_pos", "w_neg"), ()),
     "latency": (("lag",), ()),
 }
 _BASE = ("base", "drop")
 _NSTEP = {"e_pos": 1e-3, "e_neg": 1e-3, "beta_pos": 1e-3, "beta_neg": 1e-3, "gamma_pos": 1e-3,
-          "gamma_neg": 1e-3, "rho": 1e-4, "x_h": 1e-3, "phi": 1e-4, "w_pos": 1e-3, "w_neg": 1e-3,
+          "gamma_neg": 1e-3, "rho": 1e-4, "x_h": 1e-3, "phi": 1e-4, "delta": 1e-3, "w_pos": 1e-3, "w_neg": 1e-3,
           "v_eps": 1e-3, "u_wall": 1e-3, "period": 1e-5, "lag": 1e-5, "offset": 1e-3}
 
 
@@ -743,9 +759,9 @@ class _CurrentModel:
         pn = np.empty(u.size)
         e_pos, e_neg = x[_NI["e_pos"]], x[_NI["e_neg"]]
         up = _tendon(u, e_pos, e_neg, x[_NI["beta_pos"]], x[_NI["gamma_pos"]], x[_NI["rho"]],
-                     x[_NI["phi"]], x[_NI["w_pos"]], x[_NI["x_h"]], pp)
+                     x[_NI["phi"]], x[_NI["delta"]], x[_NI["w_pos"]], x[_NI["x_h"]], pp)
         un = _tendon(-u, -e_neg, -e_pos, x[_NI["beta_neg"]], x[_NI["gamma_neg"]], x[_NI["rho"]],
-                     x[_NI["phi"]], x[_NI["w_neg"]], -x[_NI["x_h"]], pn)
+                     x[_NI["phi"]], x[_NI["delta"]], x[_NI["w_neg"]], -x[_NI["x_h"]], pn)
         self.ups = (int(up), int(un))
         return qe, ve, u, pp, pn
 
@@ -830,7 +846,7 @@ def _current_bounds(bins: _Bins, qrange: tuple[float, float], vmax: float):
     for name, lo, hi in (("e_pos", q0 - qs, q1 + qs), ("e_neg", q0 - qs, q1 + qs),
                          ("beta_pos", 0.0, qs), ("beta_neg", 0.0, qs),
                          ("gamma_pos", -2 * qs, 2 * qs), ("gamma_neg", -2 * qs, 2 * qs),
-                         ("rho", 0.0, 3.0), ("x_h", q0 - qs, q1 + qs), ("phi", 0.0, 0.95),
+                         ("rho", 0.0, 3.0), ("x_h", q0 - qs, q1 + qs), ("phi", 0.0, 0.95), ("delta", 0.0, 2.0),
                          ("w_pos", 0.0, 10.0), ("w_neg", 0.0, 10.0),
                          ("v_eps", 1e-3 * vmax, vmax), ("u_wall", q0, q1), ("period", 0.2, 20.0),
                          ("lag", 0.0, 0.5), ("offset", -np.inf, np.inf)):
@@ -843,6 +859,7 @@ def _default_x(bins: _Bins, e_pos, e_neg, beta, vmax) -> np.ndarray:
     x[_NI["e_pos"]], x[_NI["e_neg"]] = e_pos, e_neg
     x[_NI["beta_pos"]] = x[_NI["beta_neg"]] = beta
     x[_NI["rho"]] = 0.3
+    x[_NI["delta"]] = 0.2
     x[_NI["x_h"]] = float(bins.q[0])
     x[_NI["v_eps"]] = min(1.0, 0.5 * vmax)
     x[_NI["period"]] = 2.0
@@ -854,7 +871,8 @@ def _default_x(bins: _Bins, e_pos, e_neg, beta, vmax) -> np.ndarray:
 class _CurrentFit:
     """A model variant, its problem and its best point."""
 
-    def __init__(self, model: _CurrentModel, lb, ub, f_scale: float, x: np.ndarray):
+    def __init__(self, model: _CurrentModel, lb, ub, f_scale: float, x: np.ndarray, tau: float = 1.0):
+        self.tau = tau
         model.lb, model.ub = lb, ub
         model.penalty = 1e3 * f_scale * math.sqrt(model.b.q.size)
         self.model = model
@@ -871,9 +889,25 @@ class _CurrentFit:
             self.x, self.s = x, s
         return self
 
+    def init_linear(self):
+        """The linear entries refitted with the nonlinear ones held (soft-L1 reweighted least
+        squares, signed law): a start whose slopes match its edges."""
+        m = self.model
+        X = m.design(self.x)
+        on = np.flatnonzero(m.lin_on)
+        A = X[:, on] * m.b.w[:, None]
+        y = m.b.x * m.b.w
+        sw = np.ones_like(y)
+        for _ in range(3):
+            coef, *_ = np.linalg.lstsq(A * sw[:, None], y * sw, rcond=None)
+            r = A @ coef - y
+            sw = (1.0 + (r / self.prob.f_scale) ** 2) ** -0.25
+        self.x[len(_NL) + on] = coef
+        return self
+
     @property
     def bic(self) -> float:
-        return _bic(self.s, self.model.b.q.size, int(self.free.sum()))
+        return _bic(self.s, self.model.b.q.size, int(self.free.sum()), self.tau)
 
 
 def _robust_sigma(r: np.ndarray) -> float:
@@ -1008,7 +1042,7 @@ def _select_terms(fit: _CurrentFit, vmax: float, qrange) -> _CurrentFit:
                 x0 = fit.x.copy()
                 x0[_NI["w_pos"]] = x0[_NI["w_neg"]] = 1.0
                 model = fit.model.with_terms(new)
-                cf = _CurrentFit(model, fit.prob.lb, fit.prob.ub, fit.prob.f_scale, x0)
+                cf = _CurrentFit(model, fit.prob.lb, fit.prob.ub, fit.prob.f_scale, x0, fit.tau)
                 cf.run(max_nfev=20)
                 screens.append((cf.bic, term, cf.x))
                 continue
@@ -1016,13 +1050,13 @@ def _select_terms(fit: _CurrentFit, vmax: float, qrange) -> _CurrentFit:
                 continue
             obj, xb = min((_screen_linear(fit, new, o) for o in opts), key=lambda z: z[0])
             p = int(fit.model.with_terms(new).free_mask().sum())
-            screens.append((_bic(obj, fit.model.b.q.size, p), term, xb))
+            screens.append((_bic(obj, fit.model.b.q.size, p, fit.tau), term, xb))
         screens.sort(key=lambda z: z[0])
         if not screens or screens[0][0] >= fit.bic:
             break
         _, term, x0 = screens[0]
         cand = _CurrentFit(fit.model.with_terms(terms | {term}), fit.prob.lb, fit.prob.ub,
-                           fit.prob.f_scale, x0).run()
+                           fit.prob.f_scale, x0, fit.tau).run()
         if cand.bic < fit.bic:
             fit = cand
         else:
@@ -1077,16 +1111,17 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
             x0[_NI["gamma_neg"]] = gn + beta
             x0[_NI["rho"]] = 0.0
             x0[_NI["phi"]] = phi
-            tried.append(_CurrentFit(model0, lb, ub, 2.0 * sigma0, x0).run(max_nfev=25))
+            tried.append(_CurrentFit(model0, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
     best = min(tried, key=lambda f: f.s).run()
     # rescale the loss to the base fit's own residuals, then choose the optional terms
     r = best.prob.resid(best.x)[:-1]
     f_scale = 2.0 * _robust_sigma(r)
     fit = _CurrentFit(best.model, lb, ub, f_scale, best.x).run()
+    fit.tau = _tau_int(fit.prob.scores(fit.x)[0])
     fit = _select_terms(fit, vmax, qrange)
     if float(np.quantile(bins.x, 0.01)) > -3.0 * f_scale and np.any(fit.model.predict(fit.x) < 0):
         mag = _CurrentFit(fit.model.with_terms(fit.model.terms, magnitude=True), lb, ub, f_scale,
-                          fit.x).run()
+                          fit.x, fit.tau).run()
         if mag.bic < fit.bic:
             fit = mag
     names = {"d_pos": _NI["e_pos"], "d_neg": _NI["e_neg"], "b_pos": _NI["beta_pos"],

@@ -1,0 +1,189 @@
+"""How the reference fits (bench/reference.py) do on a plant module's cases: resolution, coverage,
+time.
+
+For every case (seeds ``--seed`` .. ``--seed + n - 1``, families cycled in the module's order) and
+each part asked for:
+
+* ``tip``: :func:`reference.tip_reference` on the sweep's tip; per parameter, whether its 95 %
+  interval is resolved at 0.5 deg (0.05 for omega) and whether it contains the truth.
+* ``current``: :func:`reference.current_reference` on the sweep's current; ``d_pos``/``d_neg``
+  resolved at 1 deg and covered; ``b_pos``/``b_neg`` the same, counted only on plants whose
+  current law carries the backlash (``current_shows_backlash`` where the module says).
+* ``shift``: :func:`reference.shift_reference` on ``replay_case``: the replay's offset against
+  the current reference of its straight sweep; resolved at 0.5 deg and covered.
+
+Coverage is given over every case (an open interval covers) and over the resolved ones.
+Times are CPU seconds of the fitting process (``time.process_time``), medians per case.
+
+Run: ``python bench/reference_study.py --n 200 --jobs 2 [--only tip current shift]
+[--plants hystcli.zoo.plants | bench/plants/wild.py] [--seed 0] [--cases FILE]``.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import importlib.util
+import json
+import math
+import sys
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import reference as R  # noqa: E402
+
+TIP_TOL = {"omega": 0.05}
+TIP_TOL_DEG = 0.5
+CURRENT_TOL = 1.0
+SHIFT_TOL = 0.5
+
+
+def load_plants(spec: str):
+    """A plant module by dotted name or by file path."""
+    if spec.endswith(".py"):
+        path = Path(spec).resolve()
+        mod_spec = importlib.util.spec_from_file_location(path.stem, path)
+        mod = importlib.util.module_from_spec(mod_spec)
+        sys.modules[path.stem] = mod
+        mod_spec.loader.exec_module(mod)
+        return mod
+    return importlib.import_module(spec)
+
+
+def _iv(iv: R.ParamInterval) -> dict:
+    return {"estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi}
+
+
+def run_case(seed: int, family: str, spec: str, parts: tuple[str, ...]) -> dict:
+    mod = load_plants(spec)
+    out: dict = {"seed": seed, "family": family}
+    if "tip" in parts or "current" in parts:
+        case = mod.sweep_case(seed, family)
+        col = case.record.columns
+        truth = case.truth.as_dict() if hasattr(case.truth, "as_dict") else dict(case.truth)
+        out["truth"] = truth
+        out["shows_backlash"] = bool(getattr(case, "current_shows_backlash", True))
+        if "tip" in parts and "y1" in col:
+            c0 = time.process_time()
+            try:
+                fit = R.tip_reference(col["t"], col["q1"], col["y1"])
+                out["tip"] = {p: _iv(fit[p]) for p in R.TIP_PARAMS}
+                out["tip_terms"] = list(fit.terms)
+            except R.ReferenceError as exc:
+                out["tip_error"] = str(exc)
+            out["tip_cpu"] = time.process_time() - c0
+        if "current" in parts:
+            c0 = time.process_time()
+            try:
+                fit = R.current_reference(col["t"], col["q1"], col["c1"])
+                out["current"] = {p: _iv(fit[p]) for p in R.CURRENT_PARAMS}
+                out["current_terms"] = list(fit.terms)
+            except R.ReferenceError as exc:
+                out["current_error"] = str(exc)
+            out["current_cpu"] = time.process_time() - c0
+    if "shift" in parts:
+        rc = mod.replay_case(seed, family)
+        sw, rp = rc.straight_sweep.columns, rc.replay.columns
+        out["offset"] = float(rc.offset)
+        c0 = time.process_time()
+        try:
+            ref = R.current_reference(sw["t"], sw["q1"], sw["c1"])
+            off, lo, hi = R.shift_reference(ref, rp["t"], rp["q1"], rp["c1"])
+            out["shift"] = {"estimate": off, "lo": lo, "hi": hi}
+        except R.ReferenceError as exc:
+            out["shift_error"] = str(exc)
+        out["shift_cpu"] = time.process_time() - c0
+    return out
+
+
+def _call(args):
+    return run_case(*args)
+
+
+def _resolved(iv: dict, tol: float) -> bool:
+    return math.isfinite(iv["lo"]) and math.isfinite(iv["hi"]) and 0.5 * (iv["hi"] - iv["lo"]) <= tol
+
+
+def _covers(iv: dict, truth: float) -> bool:
+    return iv["lo"] <= truth <= iv["hi"]
+
+
+def _table(title: str, stats: dict) -> str:
+    lines = [title, f"{'group':28s}{'n':>6s}{'resolved':>10s}{'covered':>10s}{'cov|res':>10s}{'|err| med res':>15s}"]
+    for key in sorted(stats):
+        s = stats[key]
+        n, nr = s["n"], s["nres"]
+        med = float(np.median(s["err"])) if s["err"] else math.nan
+        lines.append(f"{key:28s}{n:6d}{nr / n if n else math.nan:10.3f}{s['cov'] / n if n else math.nan:10.3f}"
+                     f"{s['covres'] / nr if nr else math.nan:10.3f}{med:15.3f}")
+    return "\n".join(lines)
+
+
+def report(rows: list[dict]) -> str:
+    out = []
+    for part, names in (("tip", R.TIP_PARAMS), ("current", R.CURRENT_PARAMS), ("shift", ("offset",))):
+        stats: dict = defaultdict(lambda: {"n": 0, "nres": 0, "cov": 0, "covres": 0, "err": []})
+        cpu = [r[f"{part}_cpu"] for r in rows if f"{part}_cpu" in r]
+        errors = sum(f"{part}_error" in r for r in rows)
+        if not cpu:
+            continue
+        for r in rows:
+            if part not in r:
+                continue
+            for p in names:
+                if part == "current" and p.startswith("b_") and not r["shows_backlash"]:
+                    continue
+                iv = r[part] if part == "shift" else r[part][p]
+                truth = r["offset"] if part == "shift" else r["truth"][p]
+                tol = {"tip": TIP_TOL.get(p, TIP_TOL_DEG), "current": CURRENT_TOL, "shift": SHIFT_TOL}[part]
+                res, cov = _resolved(iv, tol), _covers(iv, truth)
+                for key in (p, f"{p} / {r['family']}"):
+                    s = stats[key]
+                    s["n"] += 1
+                    s["nres"] += res
+                    s["cov"] += cov
+                    s["covres"] += res and cov
+                    if res:
+                        s["err"].append(abs(iv["estimate"] - truth))
+        out.append(_table(f"== {part}: {len(cpu)} cases, {errors} refused by the reference; CPU s per case "
+                          f"median {np.median(cpu):.2f}, p90 {np.quantile(cpu, 0.9):.2f}, max {max(cpu):.2f}",
+                          stats))
+    return "\n\n".join(out)
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--n", type=int, default=200)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--jobs", type=int, default=2)
+    ap.add_argument("--plants", default="hystcli.zoo.plants")
+    ap.add_argument("--only", nargs="+", choices=("tip", "current", "shift"), default=("tip", "current", "shift"))
+    ap.add_argument("--cases", type=Path, default=None, help="write every case as a JSON line")
+    args = ap.parse_args(argv)
+    mod = load_plants(args.plants)
+    fams = tuple(mod.FAMILIES)
+    jobs = [(s, fams[(s - args.seed) % len(fams)], args.plants, tuple(args.only))
+            for s in range(args.seed, args.seed + args.n)]
+    t0 = time.perf_counter()
+    if args.jobs > 1:
+        from concurrent.futures import ProcessPoolExecutor
+
+        with ProcessPoolExecutor(args.jobs) as pool:
+            rows = list(pool.map(_call, jobs, chunksize=1))
+    else:
+        rows = [_call(j) for j in jobs]
+    if args.cases:
+        tmp = args.cases.with_suffix(args.cases.suffix + ".tmp")
+        tmp.write_text("".join(json.dumps(r) + "\n" for r in rows))
+        tmp.replace(args.cases)
+    print(f"{args.plants}: {args.n} cases from seed {args.seed}, parts {' '.join(args.only)}, "
+          f"{args.jobs} jobs, {time.perf_counter() - t0:.0f} s wall")
+    print(report(rows))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
