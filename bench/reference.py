@@ -265,6 +265,11 @@ class _Problem:
         x = full(res.x)
         return x, 2.0 * float(res.cost)
 
+    def violated(self, x: np.ndarray) -> bool:
+        """True when x breaks a validity constraint (a penalty row after the data is active)."""
+        r = self.resid(x)[self.n_data:]
+        return bool(r.size and np.any(np.abs(r) > 0.0))
+
     def scores(self, x: np.ndarray) -> tuple[np.ndarray, float]:
         """(psi of each data residual, E[psi^2]/E[psi']): the M-estimator's score series and the
         scale of its deviance (sigma^2 for plain least squares)."""
@@ -349,14 +354,16 @@ def _profile_side(prob, x_best, s_best, k, free, thr, step0, lim: _Limits, sgn: 
         step *= 2.0
     if out is None:
         return (limit, True) if domain_binds else (-math.inf if sgn < 0 else math.inf, True)
+    # a refit that can only break the model's validity constraints has run into the domain
+    hit_domain = prob.violated(out[2])
     # the profile deviance is about quadratic: its square root is about linear in the value
     a, da, xa = pv, pd, px
     b, db, _ = out
-    for _ in range(3):
-        if abs(b - a) <= tol_v:
+    for it in range(8):
+        if abs(b - a) <= max(tol_v, 0.05 * abs(a - est)):
             break
         ra, rb, rt = math.sqrt(max(da, 0.0)), math.sqrt(db), math.sqrt(thr)
-        frac = (rt - ra) / max(rb - ra, 1e-12)
+        frac = (rt - ra) / max(rb - ra, 1e-12) if it % 2 == 0 else 0.5   # interpolate, bisect
         v = a + min(max(frac, 0.1), 0.9) * (b - a)
         x0 = xa.copy()
         x0[k] = v
@@ -370,7 +377,7 @@ def _profile_side(prob, x_best, s_best, k, free, thr, step0, lim: _Limits, sgn: 
             a, da, xa = v, d, x
     ra, rb, rt = math.sqrt(max(da, 0.0)), math.sqrt(db), math.sqrt(thr)
     frac = (rt - ra) / max(rb - ra, 1e-12)
-    return a + min(max(frac, 0.0), 1.0) * (b - a), False
+    return a + min(max(frac, 0.0), 1.0) * (b - a), hit_domain
 
 
 def _wald_halfwidth(prob, x, free, k, thr) -> float:
@@ -697,7 +704,7 @@ _TERMS = {
     "onset": (("w_pos", "w_neg"), ()),
     "latency": (("lag",), ()),
 }
-_BASE = ("base", "drop")
+_BASE = ("base", "drop", "friction")
 _NSTEP = {"e_pos": 1e-3, "e_neg": 1e-3, "beta_pos": 1e-3, "beta_neg": 1e-3, "gamma_pos": 1e-3,
           "gamma_neg": 1e-3, "rho": 1e-4, "x_h": 1e-3, "phi": 1e-4, "delta": 1e-3, "w_pos": 1e-3, "w_neg": 1e-3,
           "v_eps": 1e-3, "u_wall": 1e-3, "period": 1e-5, "lag": 1e-5, "offset": 1e-3}
@@ -935,26 +942,51 @@ def _ramp_grid(q, c, w, extra, grid, sgn):
     return best
 
 
+def _knot_grid(q, c, w, extra, grid, sgn, slack):
+    """With the released tendon's slack point held, the best (edge, knot) on the loaded side: the
+    ramp past the edge bends again at the knot (a wall or a stiffening tendon)."""
+    down = np.maximum(sgn * (slack - q), 0.0)
+    best = None
+    for a in grid:
+        if sgn * (a - slack) <= 0:
+            continue
+        up = np.maximum(sgn * (q - a), 0.0)
+        for k in grid:
+            if sgn * (k - a) <= 0:
+                continue
+            A = np.column_stack([extra, up, np.maximum(sgn * (q - k), 0.0), down]) * w[:, None]
+            coef, *_ = np.linalg.lstsq(A, c * w, rcond=None)
+            score = float(np.sum(np.abs(A @ coef - c * w)))
+            if best is None or score < best[0]:
+                best = (score, float(a), float(k))
+    return best
+
+
 def _edge_grid(bins: _Bins, vmax: float):
     """Start values of the edges and slack points, read apart on each direction of travel: moving
     up, the positive tendon is taken up (its edge) while the negative one is released (its slack
-    point); moving down, the reverse. Returns (e_pos, slack_pos, e_neg, slack_neg, sigma)."""
+    point); moving down, the reverse. Also, per side, an edge whose ramp bends again at a knot
+    (a wall). Returns (e_pos, slack_pos, e_neg, slack_neg, sigma, {side: (edge, knot)})."""
     q, c, w = bins.q, bins.x, bins.w
     q0, q1 = float(q.min()), float(q.max())
     grid = q0 + (q1 - q0) * np.linspace(0.02, 0.98, 25)
     out = {}
+    knots = {}
     res = []
     for sgn in (1, -1):
         m = bins.v * sgn > 0
         if m.sum() < 20:
             return None
-        extra = np.column_stack([np.ones(int(m.sum())), bins.tn[m], bins.v[m] / vmax])
+        extra = np.column_stack([np.ones(int(m.sum())), bins.tn[m], bins.v[m] / vmax, q[m]])
         best = _ramp_grid(q[m], c[m], w[m], extra, grid, sgn)
         out[sgn] = best[1:3]
         res.append(best[3])
+        kn = _knot_grid(q[m], c[m], w[m], extra, grid, sgn, best[2])
+        if kn is not None:
+            knots[sgn] = kn[1:]
     sigma = _robust_sigma(np.concatenate(res))
     (e_pos, slack_neg), (e_neg, slack_pos) = out[1], out[-1]
-    return e_pos, slack_pos, e_neg, slack_neg, sigma
+    return e_pos, slack_pos, e_neg, slack_neg, sigma, knots
 
 
 def _pair_grid(bins: _Bins, vmax: float, k: int = 2) -> list[tuple[float, float]]:
@@ -965,7 +997,7 @@ def _pair_grid(bins: _Bins, vmax: float, k: int = 2) -> list[tuple[float, float]
     q0, q1 = float(q.min()), float(q.max())
     grid = q0 + (q1 - q0) * np.linspace(0.02, 0.98, 25)
     th = np.tanh(bins.v / max(0.05 * vmax, 1e-6))
-    base = np.column_stack([np.ones_like(q), bins.tn, th, bins.v / vmax])
+    base = np.column_stack([np.ones_like(q), bins.tn, th, bins.v / vmax, q])
     cand = []
     for i, dn in enumerate(grid):
         neg = np.maximum(dn - q, 0.0)
@@ -1097,22 +1129,33 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     grid = _edge_grid(bins, vmax)
     if grid is None:
         raise ReferenceError("the knob must move both ways")
-    e_pos, s_pos, e_neg, s_neg, sigma0 = grid
+    e_pos, s_pos, e_neg, s_neg, sigma0, knots = grid
     if e_neg >= e_pos:
         e_pos, e_neg = max(e_pos, e_neg), min(e_pos, e_neg)
+    # starts: single ramps read apart per direction (with and without a friction drop), the
+    # best whole-record pairs, and per side an edge with a wall at its knot; each with and
+    # without a hold; compared by BIC after a short fit
+    starts = [(e_pos, e_neg, s_pos - e_pos, e_neg - s_neg, phi, None) for phi in (0.0, 0.4)]
+    starts += [(dp, dn, 0.0, 0.0, 0.0, None) for dp, dn in _pair_grid(bins, vmax)]
+    if 1 in knots and knots[1][0] > e_neg:
+        starts.append((knots[1][0], e_neg, s_pos - knots[1][0], e_neg - s_neg, 0.0, ("wall+", knots[1][1])))
+    if -1 in knots and knots[-1][0] < e_pos:
+        starts.append((e_pos, knots[-1][0], s_pos - e_pos, knots[-1][0] - s_neg, 0.0, ("wall-", knots[-1][1])))
     model0 = _CurrentModel(bins, frozenset(_BASE), False, 0.5 * sum(qrange), vmax)
-    starts = [(e_pos, e_neg, s_pos - e_pos, e_neg - s_neg, phi) for phi in (0.0, 0.4)]
-    starts += [(dp, dn, 0.0, 0.0, 0.0) for dp, dn in _pair_grid(bins, vmax)]
     tried = []
-    for ep, en, gp, gn, phi in starts:
+    for ep, en, gp, gn, phi, wall in starts:
         for beta in (0.0, 0.25 * (ep - en)):
             x0 = _default_x(bins, ep, en, beta, vmax)
             x0[_NI["gamma_pos"]] = gp + beta
             x0[_NI["gamma_neg"]] = gn + beta
             x0[_NI["rho"]] = 0.0
             x0[_NI["phi"]] = phi
-            tried.append(_CurrentFit(model0, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
-    best = min(tried, key=lambda f: f.s).run()
+            model = model0
+            if wall is not None:
+                model = model0.with_terms(set(_BASE) | {wall[0]})
+                x0[_NI["u_wall"]] = wall[1]
+            tried.append(_CurrentFit(model, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
+    best = min(tried, key=lambda f: f.bic).run()
     # rescale the loss to the base fit's own residuals, then choose the optional terms
     r = best.prob.resid(best.x)[:-1]
     f_scale = 2.0 * _robust_sigma(r)
@@ -1132,9 +1175,10 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     params = {}
     for p, k in names.items():
         iv = _interval(x, k, prof[p])
-        if p.startswith("b_") and iv.lo < MIN_HOLD:
-            # the record allows no hold (or one no longer than a reversal's own rounding):
-            # the current does not carry this backlash
+        # the load must be held past the end of its friction drop (when there is one) by more
+        # than a reversal's own rounding, else the current does not carry this backlash
+        drop_end = x[_NI["delta"]] if x[_NI["phi"]] > 0.05 else 0.0
+        if p.startswith("b_") and iv.lo < drop_end + MIN_HOLD:
             iv = ParamInterval(iv.estimate, 0.0, math.inf, True, True)
         params[p] = iv
     fit.model.loads(x)

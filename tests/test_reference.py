@@ -63,14 +63,17 @@ def test_noiseless_tip_load_plant_recovered():
 
 def test_tip_backlash_open_when_the_sweep_never_leaves_its_plateau():
     tr = plants.KnobTruth(d_pos=5.0, d_neg=-5.0, b_pos=4.0, b_neg=3.0, omega=1.0, h_pos=-2.0, h_neg=2.0)
-    # up past d_pos to 20, back only 2 deg (the tip stays on its backlash plateau), up again
-    t, q = _sweep([0.0, -20.0, 20.0, 18.0, 20.0])
-    y = tr.forward(q, 0.0) + 0.05 * np.random.default_rng(0).standard_normal(q.size)
+    # from rest on the dead-zone plateau, down past d_neg, up past d_pos to 20, back only 2 deg
+    # (the tip stays on its backlash plateau), up again: b_pos >= 2 is all the record shows
+    t, q = _sweep([4.0, -20.0, 20.0, 18.0, 20.0])
+    y = tr.forward(q, 2.0) + 0.05 * np.random.default_rng(0).standard_normal(q.size)
     fit = R.tip_reference(t, q, y)
-    assert not fit["b_pos"].resolved(0.5)
-    assert fit["b_pos"].hi == math.inf and fit["b_pos"].lo < 2.5
-    assert fit["b_neg"].contains(3.0) and fit["b_neg"].resolved(0.5)
-    assert fit["d_pos"].contains(5.0) and fit["d_pos"].resolved(0.5)
+    b = fit["b_pos"]
+    assert not b.resolved(0.5) and b.contains(4.0) and b.lo < 2.5
+    assert b.hi == math.inf or b.hi_open
+    # the ascent shows the h_pos plateau and the loaded line past d_pos
+    for p in ("d_pos", "h_pos", "omega"):
+        assert fit[p].contains(getattr(tr, p)) and fit[p].resolved(0.5), (p, fit[p])
 
 
 def _stretch_current(q, d_pos, d_neg, seed=0, noise=0.5):
@@ -83,7 +86,7 @@ def test_current_edge_open_when_never_reached():
     t, q = _sweep([0.0, -3.0, 20.0, -3.0, 20.0])
     c = _stretch_current(q, 4.0, -5.0)
     fit = R.current_reference(t, q, c)
-    assert fit["d_pos"].contains(4.0) and fit["d_pos"].resolved(1.0)
+    assert abs(fit["d_pos"].estimate - 4.0) < 0.2 and fit["d_pos"].resolved(1.0)
     assert not fit["d_neg"].resolved(1.0)
     # a current that only stretches carries no backlash
     assert not fit["b_pos"].resolved(1.0) and not fit["b_neg"].resolved(1.0)
