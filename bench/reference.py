@@ -962,6 +962,21 @@ def _knot_grid(q, c, w, extra, grid, sgn, slack):
     return best
 
 
+def _slack_line(q, c, w, extra, grid, sgn, a, k):
+    """With the loaded side's edge and knot held, the best slack point of the released tendon."""
+    up = np.column_stack([np.maximum(sgn * (q - a), 0.0), np.maximum(sgn * (q - k), 0.0)])
+    best = None
+    for b in grid:
+        if sgn * (b - a) >= 0:
+            continue
+        A = np.column_stack([extra, up, np.maximum(sgn * (b - q), 0.0)]) * w[:, None]
+        coef, *_ = np.linalg.lstsq(A, c * w, rcond=None)
+        score = float(np.sum(np.abs(A @ coef - c * w)))
+        if best is None or score < best[0]:
+            best = (score, float(b))
+    return best[1] if best is not None else float(grid[0] if sgn > 0 else grid[-1])
+
+
 def _edge_grid(bins: _Bins, vmax: float):
     """Start values of the edges and slack points, read apart on each direction of travel: moving
     up, the positive tendon is taken up (its edge) while the negative one is released (its slack
@@ -981,9 +996,19 @@ def _edge_grid(bins: _Bins, vmax: float):
         best = _ramp_grid(q[m], c[m], w[m], extra, grid, sgn)
         out[sgn] = best[1:3]
         res.append(best[3])
-        kn = _knot_grid(q[m], c[m], w[m], extra, grid, sgn, best[2])
-        if kn is not None:
-            knots[sgn] = kn[1:]
+        # a wall's steep ramp can hide the edge before it: alternate the (edge, knot) grid with
+        # the released tendon's slack point
+        # (with and without a pretension slope: either can mimic the other's ramp)
+        knots[sgn] = []
+        for ex in (extra[:, :3], extra):
+            slack = q0 if sgn > 0 else q1      # start with the released tendon out of the way
+            for _ in range(2):
+                kn = _knot_grid(q[m], c[m], w[m], ex, grid, sgn, slack)
+                if kn is None:
+                    break
+                slack = _slack_line(q[m], c[m], w[m], ex, grid, sgn, kn[1], kn[2])
+            if kn is not None:
+                knots[sgn].append((kn[1], kn[2], slack))
     sigma = _robust_sigma(np.concatenate(res))
     (e_pos, slack_neg), (e_neg, slack_pos) = out[1], out[-1]
     return e_pos, slack_pos, e_neg, slack_neg, sigma, knots
@@ -1137,14 +1162,16 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     # without a hold; compared by BIC after a short fit
     starts = [(e_pos, e_neg, s_pos - e_pos, e_neg - s_neg, phi, None) for phi in (0.0, 0.4)]
     starts += [(dp, dn, 0.0, 0.0, 0.0, None) for dp, dn in _pair_grid(bins, vmax)]
-    if 1 in knots and knots[1][0] > e_neg:
-        starts.append((knots[1][0], e_neg, s_pos - knots[1][0], e_neg - s_neg, 0.0, ("wall+", knots[1][1])))
-    if -1 in knots and knots[-1][0] < e_pos:
-        starts.append((e_pos, knots[-1][0], s_pos - e_pos, knots[-1][0] - s_neg, 0.0, ("wall-", knots[-1][1])))
+    for ep, kp, sn in knots.get(1, []):
+        en = min(e_neg, ep - 1.0)
+        starts.append((ep, en, s_pos - ep, en - sn, 0.0, ("wall+", kp)))
+    for en, kn, sp in knots.get(-1, []):
+        ep = max(e_pos, en + 1.0)
+        starts.append((ep, en, sp - ep, en - s_neg, 0.0, ("wall-", kn)))
     model0 = _CurrentModel(bins, frozenset(_BASE), False, 0.5 * sum(qrange), vmax)
     tried = []
     for ep, en, gp, gn, phi, wall in starts:
-        for beta in (0.0, 0.25 * (ep - en)):
+        for beta in ((0.0,) if wall else (0.0, 0.25 * (ep - en))):
             x0 = _default_x(bins, ep, en, beta, vmax)
             x0[_NI["gamma_pos"]] = gp + beta
             x0[_NI["gamma_neg"]] = gn + beta
@@ -1155,13 +1182,34 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
                 model = model0.with_terms(set(_BASE) | {wall[0]})
                 x0[_NI["u_wall"]] = wall[1]
             tried.append(_CurrentFit(model, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
-    best = min(tried, key=lambda f: f.bic).run()
+    # the three best short fits (distinct edges) run to convergence
+    tried.sort(key=lambda f: f.bic)
+    finals: list[_CurrentFit] = []
+    for f in tried:
+        e = (f.x[_NI["e_pos"]], f.x[_NI["e_neg"]])
+        if any(abs(e[0] - g.x[_NI["e_pos"]]) < 0.5 and abs(e[1] - g.x[_NI["e_neg"]]) < 0.5 for g in finals):
+            continue
+        finals.append(f.run())
+        if len(finals) == 3:
+            break
+    best = min(finals, key=lambda f: f.bic)
     # rescale the loss to the base fit's own residuals, then choose the optional terms
     r = best.prob.resid(best.x)[:-1]
     f_scale = 2.0 * _robust_sigma(r)
     fit = _CurrentFit(best.model, lb, ub, f_scale, best.x).run()
     fit.tau = _tau_int(fit.prob.scores(fit.x)[0])
     fit = _select_terms(fit, vmax, qrange)
+    # the chosen law refitted from the other converged starts' tendon entries: keep the best
+    tendon = [_NI[k] for k in ("e_pos", "e_neg", "beta_pos", "beta_neg", "gamma_pos", "gamma_neg",
+                               "rho", "x_h", "phi", "delta")]
+    for f in finals:
+        if f is best:
+            continue
+        x0 = fit.x.copy()
+        x0[tendon] = f.x[tendon]
+        alt = _CurrentFit(fit.model, lb, ub, f_scale, x0, fit.tau).init_linear().run()
+        if alt.s < fit.s:
+            fit = alt
     if float(np.quantile(bins.x, 0.01)) > -3.0 * f_scale and np.any(fit.model.predict(fit.x) < 0):
         mag = _CurrentFit(fit.model.with_terms(fit.model.terms, magnitude=True), lb, ub, f_scale,
                           fit.x, fit.tau).run()

@@ -16,7 +16,8 @@ Coverage is given over every case (an open interval covers) and over the resolve
 Times are CPU seconds of the fitting process (``time.process_time``), medians per case.
 
 Run: ``python bench/reference_study.py --n 200 --jobs 2 [--only tip current shift]
-[--plants hystcli.zoo.plants | bench/plants/wild.py] [--seed 0] [--cases FILE]``.
+[--plants hystcli.zoo.plants | bench/plants/wild.py] [--seed 0] [--cases FILE]``;
+``--report FILE...`` pools the cases of earlier ``--cases`` files and prints the tables.
 """
 from __future__ import annotations
 
@@ -165,7 +166,14 @@ def main(argv=None) -> int:
     ap.add_argument("--plants", default="hystcli.zoo.plants")
     ap.add_argument("--only", nargs="+", choices=("tip", "current", "shift"), default=("tip", "current", "shift"))
     ap.add_argument("--cases", type=Path, default=None, help="write every case as a JSON line")
+    ap.add_argument("--report", type=Path, nargs="+", default=None,
+                    help="only pool and print the cases of these --cases files")
     args = ap.parse_args(argv)
+    if args.report:
+        rows = [json.loads(line) for f in args.report for line in f.read_text().splitlines() if line]
+        print(f"{len(rows)} cases from {' '.join(str(f) for f in args.report)}")
+        print(report(rows))
+        return 0
     mod = load_plants(args.plants)
     fams = tuple(mod.FAMILIES)
     jobs = [(s, fams[(s - args.seed) % len(fams)], args.plants, tuple(args.only))
