@@ -1,7 +1,7 @@
 """How the reference fits (bench/reference.py) do on a plant module's cases: resolution, coverage,
 time.
 
-For every case (seeds ``--seed`` .. ``--seed + n - 1``, families cycled in the module's order) and
+For every case (seeds ``--seed`` .. ``--seed + n - 1``, seed s of family ``FAMILIES[s % len]``) and
 each part asked for:
 
 * ``tip``: :func:`reference.tip_reference` on the sweep's tip; per parameter, whether its 95 %
@@ -176,7 +176,7 @@ def main(argv=None) -> int:
         return 0
     mod = load_plants(args.plants)
     fams = tuple(mod.FAMILIES)
-    jobs = [(s, fams[(s - args.seed) % len(fams)], args.plants, tuple(args.only))
+    jobs = [(s, fams[s % len(fams)], args.plants, tuple(args.only))
             for s in range(args.seed, args.seed + args.n)]
     t0 = time.perf_counter()
     if args.jobs > 1:
