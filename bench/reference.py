@@ -50,6 +50,8 @@ CURRENT_PARAMS = ("d_pos", "d_neg", "b_pos", "b_neg")
 MIN_HOLD = 0.25
 """deg: a current's hold after a reversal shorter than this is not read as a backlash (the bins,
 a drop's own travel and the filter round a reversal over about that much knob travel)."""
+EDGE_FOR_HOLD = 1.0
+"""deg: a tendon's hold is read only where its edge is placed to this half-width."""
 MAX_BINS = 2000
 """Bins a record is reduced to (about): enough for 0.1-deg edges on a full sweep, and fast."""
 
@@ -858,6 +860,10 @@ def _current_bounds(bins: _Bins, qrange: tuple[float, float], vmax: float):
                          ("v_eps", 1e-3 * vmax, vmax), ("u_wall", q0, q1), ("period", 0.2, 20.0),
                          ("lag", 0.0, 0.5), ("offset", -np.inf, np.inf)):
         lb[_NI[name]], ub[_NI[name]] = lo, hi
+    # a tendon taken up pulls the current its own way (up for the positive one, down for the
+    # negative one; the magnitude variant folds the sign), and so does a wall
+    for name in ("k_pos", "k_neg", "k_wall"):
+        lb[_LI[name]] = 0.0
     return lb, ub
 
 
@@ -909,7 +915,7 @@ class _CurrentFit:
             coef, *_ = np.linalg.lstsq(A * sw[:, None], y * sw, rcond=None)
             r = A @ coef - y
             sw = (1.0 + (r / self.prob.f_scale) ** 2) ** -0.25
-        self.x[len(_NL) + on] = coef
+        self.x[len(_NL) + on] = np.clip(coef, self.prob.lb[len(_NL) + on], self.prob.ub[len(_NL) + on])
         return self
 
     @property
@@ -1226,7 +1232,10 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
         # the load must be held past the end of its friction drop (when there is one) by more
         # than a reversal's own rounding, else the current does not carry this backlash
         drop_end = x[_NI["delta"]] if x[_NI["phi"]] > 0.05 else 0.0
-        if p.startswith("b_") and iv.lo < drop_end + MIN_HOLD:
+        # nor does a tendon whose take-up the record does not place (its edge unresolved)
+        edge = params.get("d_" + p[2:]) if p.startswith("b_") else None
+        edge_open = edge is not None and not edge.resolved(EDGE_FOR_HOLD)
+        if p.startswith("b_") and (iv.lo < drop_end + MIN_HOLD or edge_open):
             iv = ParamInterval(iv.estimate, 0.0, math.inf, True, True)
         params[p] = iv
     fit.model.loads(x)

@@ -95,7 +95,7 @@ def test_current_edge_open_when_never_reached():
 def test_shift_found_and_open_without_an_edge_crossed_from_slack():
     t, q = _sweep([0.0, -20.0, 20.0, -20.0, 20.0, 0.0])
     sweep = R.current_reference(t, q, _stretch_current(q, 4.0, -5.0))
-    assert sweep["d_pos"].contains(4.0) and sweep["d_neg"].contains(-5.0)
+    assert abs(sweep["d_pos"].estimate - 4.0) < 0.1 and abs(sweep["d_neg"].estimate + 5.0) < 0.1
     tr, qr = _sweep([0.0, 25.0, -15.0, 0.0])
     off, lo, hi = R.shift_reference(sweep, tr, qr, _stretch_current(qr, 4.0 + 6.0, -5.0 + 6.0, seed=1))
     assert abs(off - 6.0) < 0.3 and lo <= 6.0 <= hi and hi - lo < 1.0
