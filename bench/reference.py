@@ -725,7 +725,7 @@ class _CurrentModel:
 
     with ``u = q(t - lag) - offset`` and the tendon loads P+ (coordinate u, edge e_pos) and P-
     (coordinate -u, edge -e_neg) from :func:`_tendon`. The outer absolute value is the
-    ``magnitude`` variant (a current logged without its sign).
+    ``magnitude`` variant (a current logged without its sign: ``c0 + |c - c0|``).
     """
 
     def __init__(self, bins: _Bins, terms: frozenset, magnitude: bool, u_mid: float, vscale: float):
@@ -812,7 +812,14 @@ class _CurrentModel:
     def predict(self, x, X=None):
         X = self.design(x) if X is None else X
         m = X @ x[len(_NL):]
-        return np.abs(m) if self.magnitude else m
+        return self._fold(m, x)
+
+    def _fold(self, m, x):
+        """The magnitude variant folds the current about its no-load level c0."""
+        if not self.magnitude:
+            return m
+        c0 = x[_LI["c0"]]
+        return c0 + np.abs(m - c0)
 
     def resid(self, x):
         r = self.b.w * (self.predict(x) - self.b.x)
@@ -822,11 +829,13 @@ class _CurrentModel:
     def jac(self, x, idx):
         X = self.design(x)
         m = X @ x[len(_NL):]
-        base = self.b.w * ((np.abs(m) if self.magnitude else m) - self.b.x)
-        sgn = np.sign(m) if self.magnitude else 1.0
+        base = self.b.w * (self._fold(m, x) - self.b.x)
+        sgn = np.sign(m - x[_LI["c0"]]) if self.magnitude else 1.0
         J = np.zeros((base.size + 1, idx.size))
         for j, i in enumerate(idx):
-            if i >= len(_NL):
+            if i == _LI["c0"]:
+                J[:-1, j] = self.b.w
+            elif i >= len(_NL):
                 J[:-1, j] = self.b.w * sgn * X[:, i - len(_NL)]
             else:
                 h = _NSTEP[_NL[i]]
@@ -908,6 +917,8 @@ class _CurrentFit:
         m = self.model
         X = m.design(self.x)
         on = np.flatnonzero(m.lin_on)
+        if m.magnitude:      # folded about no-load, the negative side rises too
+            X[:, 2] = -X[:, 2]
         A = X[:, on] * m.b.w[:, None]
         y = m.b.x * m.b.w
         sw = np.ones_like(y)
@@ -1174,31 +1185,41 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     for en, kn, sp in knots.get(-1, []):
         ep = max(e_pos, en + 1.0)
         starts.append((ep, en, sp - ep, en - s_neg, 0.0, ("wall-", kn)))
-    model0 = _CurrentModel(bins, frozenset(_BASE), False, 0.5 * sum(qrange), vmax)
-    tried = []
-    for ep, en, gp, gn, phi, wall in starts:
-        for beta in ((0.0,) if wall else (0.0, 0.25 * (ep - en))):
-            x0 = _default_x(bins, ep, en, beta, vmax)
-            x0[_NI["gamma_pos"]] = gp + beta
-            x0[_NI["gamma_neg"]] = gn + beta
-            x0[_NI["rho"]] = 0.0
-            x0[_NI["phi"]] = phi
-            model = model0
-            if wall is not None:
-                model = model0.with_terms(set(_BASE) | {wall[0]})
-                x0[_NI["u_wall"]] = wall[1]
-            tried.append(_CurrentFit(model, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
-    # the three best short fits (distinct edges) run to convergence
-    tried.sort(key=lambda f: f.bic)
-    finals: list[_CurrentFit] = []
-    for f in tried:
-        e = (f.x[_NI["e_pos"]], f.x[_NI["e_neg"]])
-        if any(abs(e[0] - g.x[_NI["e_pos"]]) < 0.5 and abs(e[1] - g.x[_NI["e_neg"]]) < 0.5 for g in finals):
-            continue
-        finals.append(f.run())
-        if len(finals) == 3:
-            break
-    best = min(finals, key=lambda f: f.bic)
+    def base_fits(magnitude: bool):
+        model0 = _CurrentModel(bins, frozenset(_BASE), magnitude, 0.5 * sum(qrange), vmax)
+        tried = []
+        for ep, en, gp, gn, phi, wall in starts:
+            for beta in ((0.0,) if wall else (0.0, 0.25 * (ep - en))):
+                x0 = _default_x(bins, ep, en, beta, vmax)
+                x0[_NI["gamma_pos"]] = gp + beta
+                x0[_NI["gamma_neg"]] = gn + beta
+                x0[_NI["rho"]] = 0.0
+                x0[_NI["phi"]] = phi
+                model = model0
+                if wall is not None:
+                    model = model0.with_terms(set(_BASE) | {wall[0]})
+                    x0[_NI["u_wall"]] = wall[1]
+                tried.append(_CurrentFit(model, lb, ub, 2.0 * sigma0, x0).init_linear().run(max_nfev=25))
+        # the three best short fits (distinct edges) run to convergence
+        tried.sort(key=lambda f: f.bic)
+        finals: list[_CurrentFit] = []
+        for f in tried:
+            e = (f.x[_NI["e_pos"]], f.x[_NI["e_neg"]])
+            if any(abs(e[0] - g.x[_NI["e_pos"]]) < 0.5 and abs(e[1] - g.x[_NI["e_neg"]]) < 0.5 for g in finals):
+                continue
+            finals.append(f.run())
+            if len(finals) == 3:
+                break
+        best = min(finals, key=lambda f: f.bic)
+        return best, finals
+
+    best, finals = base_fits(False)
+    k = (best.x[_LI["k_pos"]], best.x[_LI["k_neg"]])
+    if min(k) < 0.1 * max(max(k), 1e-12):
+        # one tendon pulls no current its own way: the current may be logged as a magnitude
+        alt = base_fits(True)
+        if alt[0].bic < best.bic:
+            best, finals = alt
     # rescale the loss to the base fit's own residuals, then choose the optional terms
     r = best.prob.resid(best.x)[:-1]
     f_scale = 2.0 * _robust_sigma(r)
@@ -1216,11 +1237,6 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
         alt = _CurrentFit(fit.model, lb, ub, f_scale, x0, fit.tau).init_linear().run()
         if alt.s < fit.s:
             fit = alt
-    if float(np.quantile(bins.x, 0.01)) > -3.0 * f_scale and np.any(fit.model.predict(fit.x) < 0):
-        mag = _CurrentFit(fit.model.with_terms(fit.model.terms, magnitude=True), lb, ub, f_scale,
-                          fit.x, fit.tau).run()
-        if mag.bic < fit.bic:
-            fit = mag
     names = {"d_pos": _NI["e_pos"], "d_neg": _NI["e_neg"], "b_pos": _NI["beta_pos"],
              "b_neg": _NI["beta_neg"]}
     limits = _current_limits(qrange, names)

@@ -7,7 +7,8 @@ each part asked for:
 * ``tip``: :func:`reference.tip_reference` on the sweep's tip; per parameter, whether its 95 %
   interval is resolved at 0.5 deg (0.05 for omega) and whether it contains the truth.
 * ``current``: :func:`reference.current_reference` on the sweep's current; ``d_pos``/``d_neg``
-  resolved at 1 deg and covered; ``b_pos``/``b_neg`` the same, counted only on plants whose
+  resolved at 1 deg and covered (against the current's own edges ``current_edge_pos/neg`` where
+  the module's factors give them apart from the tip's); ``b_pos``/``b_neg`` the same, counted only on plants whose
   current law carries the backlash (``current_shows_backlash`` where the module says).
 * ``shift``: :func:`reference.shift_reference` on ``replay_case``: the replay's offset against
   the current reference of its straight sweep; resolved at 0.5 deg and covered.
@@ -46,6 +47,9 @@ def load_plants(spec: str):
     """A plant module by dotted name or by file path."""
     if spec.endswith(".py"):
         path = Path(spec).resolve()
+        if (path.parent / "__init__.py").exists():     # a module of a package: import it as such
+            sys.path.insert(0, str(path.parent.parent))
+            return importlib.import_module(f"{path.parent.name}.{path.stem}")
         mod_spec = importlib.util.spec_from_file_location(path.stem, path)
         mod = importlib.util.module_from_spec(mod_spec)
         sys.modules[path.stem] = mod
@@ -68,6 +72,9 @@ def run_case(seed: int, family: str, spec: str, parts: tuple[str, ...]) -> dict:
         truth = case.truth.as_dict() if hasattr(case.truth, "as_dict") else dict(case.truth)
         out["truth"] = truth
         out["shows_backlash"] = bool(getattr(case, "current_shows_backlash", True))
+        f = getattr(case, "factors", {}) or {}
+        if "current_edge_pos" in f:      # a plant whose current's edges are not the tip's
+            out["current_truth"] = {"d_pos": float(f["current_edge_pos"]), "d_neg": float(f["current_edge_neg"])}
         if "tip" in parts and "y1" in col:
             c0 = time.process_time()
             try:
@@ -142,6 +149,8 @@ def report(rows: list[dict]) -> str:
                     continue
                 iv = r[part] if part == "shift" else r[part][p]
                 truth = r["offset"] if part == "shift" else r["truth"][p]
+                if part == "current" and p in r.get("current_truth", {}):
+                    truth = r["current_truth"][p]
                 tol = {"tip": TIP_TOL.get(p, TIP_TOL_DEG), "current": CURRENT_TOL, "shift": SHIFT_TOL}[part]
                 res, cov = _resolved(iv, tol), _covers(iv, truth)
                 for key in (p, f"{p} / {r['family']}"):

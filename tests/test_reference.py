@@ -110,3 +110,13 @@ def test_bad_records_refused():
         R.tip_reference(np.arange(10.0), np.arange(10.0), np.zeros(10))
     with pytest.raises(R.ReferenceError):
         R.current_reference(np.arange(100.0), np.zeros(100), np.zeros(100))
+
+
+def test_magnitude_current_folded_about_no_load():
+    t, q = _sweep([0.0, -20.0, 20.0, -20.0, 20.0])
+    rng = np.random.default_rng(3)
+    signed = 6.0 * np.maximum(q - 4.0, 0.0) - 4.0 * np.maximum(-5.0 - q, 0.0)
+    c = 20.0 + np.abs(signed) + 0.5 * rng.standard_normal(q.size)
+    fit = R.current_reference(t, q, c)
+    assert "magnitude" in fit.terms
+    assert abs(fit["d_pos"].estimate - 4.0) < 0.2 and abs(fit["d_neg"].estimate + 5.0) < 0.2
