@@ -12,11 +12,21 @@ Three estimators, each a least-squares fit with a 95 % profile-likelihood interv
     written here as medians of their three pieces), from a grid of starts over the swept range.
     A rigid wall that stops the tip on one side is an optional term, kept when BIC prefers it.
 ``current_reference(t, q, c)``
-    One superset physical law of the motor current (see :class:`_CurrentModel`) fitted by robust
-    least squares (soft-L1 loss scaled to a robust noise estimate) over the whole sweep, its
-    optional terms chosen by BIC. It gives the knob angles where each tendon's current departs
+    One superset physical law of the motor current (:class:`_CurrentModel`) fitted by robust
+    least squares (soft-L1 loss scaled to twice a robust noise estimate) over the whole sweep:
+    a no-load level with drift, motor Coulomb and viscous friction (and friction growing with the
+    load), a pretension slope, each tendon's load from its own state (stretch past its edge,
+    optionally with a rounded onset; at a reversal a friction drop over a short travel, a hold
+    over the backlash, a linear release to a slack point), stiffening, a wall on one side,
+    cogging ripple in ``q``, a latency of the current behind the command, and a magnitude
+    variant (``c0 + |c - c0|``). The base law (level, tendons, drop, friction) is fitted from
+    generic starts (edges and slack points read per direction of travel by grids of linear
+    fits, with a second knot for a wall; whole-record edge pairs), the best three run to
+    convergence; the optional terms are then added greedily while BIC (over ``n / tau``
+    effective samples) drops. It gives the knob angles where each tendon's current departs
     from no-load (``d_pos``, ``d_neg``) and, where the fitted law holds a tendon's load after a
-    reversal, the length of that hold (``b_pos``, ``b_neg``).
+    reversal past its drop (by more than :data:`MIN_HOLD`, behind an edge placed within
+    :data:`EDGE_FOR_HOLD`), the length of that hold (``b_pos``, ``b_neg``).
 ``shift_reference(sweep_ref, t, q, c)``
     The same law with the sweep's fit held, the replay's own level, drift and friction free, and
     the shift ``offset`` of all tendon terms along the knob axis.
