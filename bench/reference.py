@@ -126,7 +126,7 @@ def _one_thread(f):
     return wrapped
 
 
-class ReferenceError(ValueError):
+class RefFitError(ValueError):
     """A record the reference cannot fit at all (too short, no knob motion, not finite)."""
 
 
@@ -194,13 +194,13 @@ def _binned(t, q, x, *, median: bool, max_bins: int = MAX_BINS) -> _Bins:
     q = np.ascontiguousarray(q, dtype=np.float64)
     x = np.ascontiguousarray(x, dtype=np.float64)
     if not (t.ndim == q.ndim == x.ndim == 1 and t.size == q.size == x.size):
-        raise ReferenceError("t, q and the measured column must be 1-D arrays of one length")
+        raise RefFitError("t, q and the measured column must be 1-D arrays of one length")
     if t.size < 30:
-        raise ReferenceError(f"a record of {t.size} samples is too short (at least 30)")
+        raise RefFitError(f"a record of {t.size} samples is too short (at least 30)")
     if not (np.all(np.isfinite(t)) and np.all(np.isfinite(q)) and np.all(np.isfinite(x))):
-        raise ReferenceError("the record has non-finite samples")
+        raise RefFitError("the record has non-finite samples")
     if np.ptp(q) <= 0.0:
-        raise ReferenceError("the knob never moves")
+        raise RefFitError("the knob never moves")
     order = np.argsort(t, kind="stable")
     t, q, x = t[order], q[order], x[order]
     dt = np.diff(t)
@@ -404,7 +404,7 @@ def _wald_halfwidth(prob, x, free, k, thr) -> float:
 
 
 def _profiles(prob, x_best, s_best, free, names: dict[str, int], limits: dict[str, _Limits],
-              min_step: dict[str, float], refit_free=None, restarts: int = 3):
+              min_step: dict[str, float], restarts: int = 3):
     """Profile every named parameter; a better optimum found on the way restarts all profiles.
 
     Returns (x_best, s_best, {name: (lo, hi, lo_open, hi_open)}, tau, scale).
@@ -429,7 +429,7 @@ def _profiles(prob, x_best, s_best, free, names: dict[str, int], limits: dict[st
                 out[name] = (lo, hi, lo_open, hi_open)
             return x_best, s_best, out, tau, scale
         except _Better as b:
-            x_best, s_best = prob.fit(b.x, refit_free if refit_free is not None else free)
+            x_best, s_best = prob.fit(b.x, free)
     raise AssertionError("unreachable: the last round never restarts")
 
 
@@ -475,8 +475,6 @@ def _clamp(u, d_pos, d_neg, b_pos, b_neg, omega, h_pos, h_neg, y0, wall_side, wa
 
 class _TipModel:
     """x = d_pos, d_neg, b_pos, b_neg, omega, h_pos, h_neg, y0, wall_y."""
-
-    N = 9
 
     def __init__(self, bins: _Bins, wall_side: float):
         self.b = bins
@@ -1180,7 +1178,7 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     lb, ub = _current_bounds(bins, qrange, vmax)
     grid = _edge_grid(bins, vmax)
     if grid is None:
-        raise ReferenceError("the knob must move both ways")
+        raise RefFitError("the knob must move both ways")
     e_pos, s_pos, e_neg, s_neg, sigma0, knots = grid
     if e_neg >= e_pos:
         e_pos, e_neg = max(e_pos, e_neg), min(e_pos, e_neg)
@@ -1293,7 +1291,7 @@ def shift_reference(sweep_ref: RefFit, t, q, c, *, max_bins: int = MAX_BINS) -> 
     """
     law = sweep_ref.law
     if "terms" not in law:
-        raise ReferenceError("shift_reference needs a current_reference fit of the sweep")
+        raise RefFitError("shift_reference needs a current_reference fit of the sweep")
     bins = _binned(t, q, c, median=True, max_bins=max_bins)
     xs = np.array(law["x"], float)
     # the sweep's own time trend is not the replay's: drop its curvature, free its slope

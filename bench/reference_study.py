@@ -62,6 +62,19 @@ def _iv(iv: R.ParamInterval) -> dict:
     return {"estimate": iv.estimate, "lo": iv.lo, "hi": iv.hi}
 
 
+def _timed(out: dict, part: str, fit_fn, *args):
+    """fit_fn(*args) with its CPU time (and terms, or refusal) noted in out under part."""
+    c0 = time.process_time()
+    fit = None
+    try:
+        fit = fit_fn(*args)
+        out[f"{part}_terms"] = list(fit.terms)
+    except R.RefFitError as exc:
+        out[f"{part}_error"] = str(exc)
+    out[f"{part}_cpu"] = time.process_time() - c0
+    return fit
+
+
 def run_case(seed: int, family: str, spec: str, parts: tuple[str, ...]) -> dict:
     mod = load_plants(spec)
     out: dict = {"seed": seed, "family": family}
@@ -76,23 +89,13 @@ def run_case(seed: int, family: str, spec: str, parts: tuple[str, ...]) -> dict:
         if "current_edge_pos" in f:      # a plant whose current's edges are not the tip's
             out["current_truth"] = {"d_pos": float(f["current_edge_pos"]), "d_neg": float(f["current_edge_neg"])}
         if "tip" in parts and "y1" in col:
-            c0 = time.process_time()
-            try:
-                fit = R.tip_reference(col["t"], col["q1"], col["y1"])
+            fit = _timed(out, "tip", R.tip_reference, col["t"], col["q1"], col["y1"])
+            if fit is not None:
                 out["tip"] = {p: _iv(fit[p]) for p in R.TIP_PARAMS}
-                out["tip_terms"] = list(fit.terms)
-            except R.ReferenceError as exc:
-                out["tip_error"] = str(exc)
-            out["tip_cpu"] = time.process_time() - c0
         if "current" in parts:
-            c0 = time.process_time()
-            try:
-                fit = sweep_fit = R.current_reference(col["t"], col["q1"], col["c1"])
+            fit = sweep_fit = _timed(out, "current", R.current_reference, col["t"], col["q1"], col["c1"])
+            if fit is not None:
                 out["current"] = {p: _iv(fit[p]) for p in R.CURRENT_PARAMS}
-                out["current_terms"] = list(fit.terms)
-            except R.ReferenceError as exc:
-                out["current_error"] = str(exc)
-            out["current_cpu"] = time.process_time() - c0
     if "shift" in parts:
         rc = mod.replay_case(seed, family)
         sw, rp = rc.straight_sweep.columns, rc.replay.columns
@@ -104,7 +107,7 @@ def run_case(seed: int, family: str, spec: str, parts: tuple[str, ...]) -> dict:
             ref = sweep_fit if same else R.current_reference(sw["t"], sw["q1"], sw["c1"])
             off, lo, hi = R.shift_reference(ref, rp["t"], rp["q1"], rp["c1"])
             out["shift"] = {"estimate": off, "lo": lo, "hi": hi}
-        except R.ReferenceError as exc:
+        except R.RefFitError as exc:
             out["shift_error"] = str(exc)
         out["shift_cpu"] = time.process_time() - c0
     return out

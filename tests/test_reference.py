@@ -106,9 +106,9 @@ def test_shift_found_and_open_without_an_edge_crossed_from_slack():
 
 
 def test_bad_records_refused():
-    with pytest.raises(R.ReferenceError):
+    with pytest.raises(R.RefFitError):
         R.tip_reference(np.arange(10.0), np.arange(10.0), np.zeros(10))
-    with pytest.raises(R.ReferenceError):
+    with pytest.raises(R.RefFitError):
         R.current_reference(np.arange(100.0), np.zeros(100), np.zeros(100))
 
 
