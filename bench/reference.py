@@ -187,6 +187,9 @@ class _Bins:
     x: np.ndarray        # the measured column (tip or current), per bin
     w: np.ndarray        # sqrt(samples in the bin)
     tn: np.ndarray       # time scaled to [-1, 1]
+    q_raw: np.ndarray    # the knob's samples (time order), and where each bin starts in them
+    starts: np.ndarray
+    travel: float        # the most knob travel a bin may span (deg)
 
 
 def _binned(t, q, x, *, median: bool, max_bins: int = MAX_BINS) -> _Bins:
@@ -211,7 +214,8 @@ def _binned(t, q, x, *, median: bool, max_bins: int = MAX_BINS) -> _Bins:
     st = _bin_starts(q, max_travel, max_count)
     tb, qb, vb, xb, mb = _aggregate(st, t, q, v, x, median)
     span = max(float(tb[-1] - tb[0]), 1e-9)
-    return _Bins(t=tb, q=qb, v=vb, x=xb, w=np.sqrt(mb), tn=2.0 * (tb - tb[0]) / span - 1.0)
+    return _Bins(t=tb, q=qb, v=vb, x=xb, w=np.sqrt(mb), tn=2.0 * (tb - tb[0]) / span - 1.0,
+                 q_raw=q, starts=st[:-1].copy(), travel=max_travel)
 
 
 # --------------------------------------------------------------------------------------------
@@ -440,6 +444,13 @@ def _interval(x, k, prof) -> ParamInterval:
                          lo_open=bool(lo_open), hi_open=bool(hi_open))
 
 
+def _widen(iv: ParamInterval, by: float) -> ParamInterval:
+    """The interval widened by ``by`` on each finite side not held at a domain limit."""
+    lo = iv.lo if iv.lo_open else iv.lo - by
+    hi = iv.hi if iv.hi_open else iv.hi + by
+    return ParamInterval(iv.estimate, lo, hi, iv.lo_open, iv.hi_open)
+
+
 def _bic(s: float, n: int, p: int, tau: float = 1.0) -> float:
     """BIC of an objective s over n residuals with p free parameters; residuals correlated over
     tau bins carry the information of n / tau independent ones."""
@@ -484,7 +495,11 @@ class _TipModel:
         self.penalty = 1e3 * math.sqrt(float(np.sum(bins.w ** 2))) * ys / max(qs, 1.0)
 
     def predict(self, x):
-        return _clamp(self.b.q, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], self.wall_side, x[8])
+        """The recursion on every sample, averaged per bin as the data are (exact bin means: a
+        kink inside a bin costs no bias)."""
+        b = self.b
+        y = _clamp(b.q_raw, x[0], x[1], x[2], x[3], x[4], x[5], x[6], x[7], self.wall_side, x[8])
+        return np.add.reduceat(y, b.starts) / (b.w * b.w)
 
     def resid(self, x):
         r = self.b.w * (self.predict(x) - self.b.x)
@@ -539,10 +554,10 @@ def _tip_starts(bins: _Bins) -> list[np.ndarray]:
         if any(abs(dp - a) < 0.1 * (q1 - q0) and abs(dn - b) < 0.1 * (q1 - q0) for a, b in picked):
             continue
         picked.append((dp, dn))
-        for bf in (0.0, 0.3):
+        for bf in (0.0, 0.3, 0.6):
             b = bf * (dp - dn)
             starts.append(np.array([dp, dn, b, b, om, h, h, float(y[0]), 0.0]))
-        if len(picked) == 4:
+        if len(picked) == 6:
             break
     if not starts:
         mid = 0.5 * (q0 + q1)
@@ -1252,7 +1267,9 @@ def current_reference(t, q, c, *, max_bins: int = MAX_BINS) -> RefFit:
     x, s, prof, tau, scale = _profiles(fit.prob, fit.x, fit.run().s, fit.free, names, limits, min_step)
     params = {}
     for p, k in names.items():
-        iv = _interval(x, k, prof[p])
+        # the law is evaluated at each bin's mean knob angle: an edge inside a bin is placed to
+        # about half the bin's travel, whatever the noise
+        iv = _widen(_interval(x, k, prof[p]), 0.5 * bins.travel)
         # the load must be held past the end of its friction drop (when there is one) by more
         # than a reversal's own rounding, else the current does not carry this backlash
         drop_end = x[_NI["delta"]] if x[_NI["phi"]] > 0.05 else 0.0
@@ -1357,4 +1374,5 @@ def shift_reference(sweep_ref: RefFit, t, q, c, *, max_bins: int = MAX_BINS) -> 
     if sum(model.ups) == 0:
         return float(x[k]), -math.inf, math.inf
     lo, hi, _, _ = prof["offset"]
-    return float(x[k]), float(min(lo, x[k])), float(max(hi, x[k]))
+    half = 0.5 * bins.travel      # the bins' own resolution (see current_reference)
+    return float(x[k]), float(min(lo, x[k]) - half), float(max(hi, x[k]) + half)
