@@ -484,8 +484,32 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         the knob first; its message says so.
     """
     k = int(knob)
-    km = model.knob(k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
+    direction, max_travel, max_steps = _limits(model, k, probe, ref, step, max_travel, max_steps, direction)
+    search = _Search(probe, ref, settings, float(step), max_steps, max_travel, direction, progress)
+    start = search.start
+    try:
+        edge = search.run()
+        _check_width(k, edge, ref, settings)
+    except BaseException as exc:
+        _, note = return_knob(probe, start)
+        if isinstance(exc, HystError):
+            raise type(exc)(f"knob {k}: {exc}; {note}" if not str(exc).startswith(f"knob {k}") else f"{exc}; {note}") \
+                from exc
+        if hasattr(exc, "add_note"):
+            exc.add_note(note)
+        raise
+    returned = False
+    if return_home:
+        returned, note = return_knob(probe, start)
+        if not returned:
+            raise ShiftDetectionError(f"knob {k}: edge found at {edge.at:.2f} deg, but {note}")
+    return _result(k, model.knob(k), edge, ref, search, returned, float(step))
+
+
+def _limits(model: Model, k: int, probe: Any, ref: Reference, step: float, max_travel: float | None,
+            max_steps: int | None, direction: int | None) -> tuple[int, float, int]:
+    """The search's first direction, travel limit and step limit, checked."""
     user_direction = direction is not None
     if direction is None:
         direction = int(getattr(probe, "first_direction", 1))
@@ -501,41 +525,34 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         max_steps = 3 * int(math.ceil(max_travel / step - 1e-9)) + 2 * MIN_READINGS
     if direction not in ref.edges and not hasattr(probe, "first_direction") and not user_direction:
         direction = -direction
-    search = _Search(probe, ref, settings, float(step), int(max_steps), max_travel, int(direction), progress)
-    start = search.start
-    try:
-        edge = search.run()
-        off_lo, off_hi = _offset_interval(edge, ref)
-        offset = edge.at - ref.edges[edge.direction].value
-        if max(offset - off_lo, off_hi - offset) > settings.max_offset_halfwidth:
-            raise ShiftDetectionError(
-                f"knob {k}: the tendon is taken up at {edge.at:.2f} deg [{edge.lo:.2f}, {edge.hi:.2f}], giving an "
-                f"offset of {offset:+.2f} deg known only to [{off_lo:+.2f}, {off_hi:+.2f}] at "
-                f"{settings.level:.0%}, wider than +-{settings.max_offset_halfwidth:g} deg: the current does not "
-                "place the edge well enough to move the robot by it")
-    except BaseException as exc:
-        _, note = return_knob(probe, start)
-        if isinstance(exc, HystError):
-            raise type(exc)(f"knob {k}: {exc}; {note}" if not str(exc).startswith(f"knob {k}") else f"{exc}; {note}") \
-                from exc
-        if hasattr(exc, "add_note"):
-            exc.add_note(note)
-        raise
-    returned = False
-    if return_home:
-        returned, note = return_knob(probe, start)
-        if not returned:
-            raise ShiftDetectionError(f"knob {k}: edge found at {edge.at:.2f} deg, but {note}")
+    return int(direction), max_travel, int(max_steps)
+
+
+def _check_width(k: int, edge: _Edge, ref: Reference, settings: Settings) -> None:
+    """Refuse an offset known less well than the settings allow (it would move the robot)."""
+    off_lo, off_hi = _offset_interval(edge, ref)
+    offset = edge.at - ref.edges[edge.direction].value
+    if max(offset - off_lo, off_hi - offset) > settings.max_offset_halfwidth:
+        raise ShiftDetectionError(
+            f"knob {k}: the tendon is taken up at {edge.at:.2f} deg [{edge.lo:.2f}, {edge.hi:.2f}], giving an "
+            f"offset of {offset:+.2f} deg known only to [{off_lo:+.2f}, {off_hi:+.2f}] at "
+            f"{settings.level:.0%}, wider than +-{settings.max_offset_halfwidth:g} deg: the current does not "
+            "place the edge well enough to move the robot by it")
+
+
+def _result(k: int, km: Any, edge: _Edge, ref: Reference, search: _Search, returned: bool, step: float) -> ShiftResult:
+    off_lo, off_hi = _offset_interval(edge, ref)
+    offset = edge.at - ref.edges[edge.direction].value
     d = edge.direction
     ev = Evidence(statistic=edge.statistic, threshold=edge.threshold, edge_lo=edge.lo, edge_hi=edge.hi,
                   level=edge.level, expected_level=ref.edge_level.get(d), slope_before=edge.slope_before,
                   slope_after=edge.slope_after, n_before=edge.n_before, n_after=edge.n_after, noise=edge.noise)
-    return ShiftResult(knob=k, offset=float(offset), offset_lo=float(off_lo), offset_hi=float(off_hi),
-                       d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
+    return ShiftResult(knob=k, offset=float(offset), offset_lo=float(off_lo),
+                       offset_hi=float(off_hi), d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
                        edge="pos" if d > 0 else "neg", edge_found_at=float(edge.at), direction=d,
-                       reference=ref.kinds[d], start=start, travel=float(search.travel), steps=search.steps,
+                       reference=ref.kinds[d], start=search.start, travel=float(search.travel), steps=search.steps,
                        contacts=tuple(search.contacts), start_outside=search.turned_taut, returned=returned,
-                       step=float(step), evidence=ev, trace=tuple(search.trace))
+                       step=step, evidence=ev, trace=tuple(search.trace))
 
 
 def _check_options(step: float, max_travel: float, max_steps: int | None, direction: int) -> None:
