@@ -23,7 +23,8 @@ or not (``-beyond``).
 Coverage: the share of fixed estimates whose interval holds the truth (nominal 95 %).
 
 Run: ``python bench/zoo.py --n 200 --seed 9100000 --jobs 2 [--plants zoo|wild] [--only ...]
-[--cases FILE]``; every scored case can be written as a JSON line (``--cases``).
+[--cases FILE]``; every scored case can be written as a JSON line (``--cases``), and stored case
+files pooled and summarised again (``--load FILE [FILE ...]``).
 """
 from __future__ import annotations
 
@@ -200,6 +201,29 @@ def covered(case: dict) -> dict[str, bool]:
     return out
 
 
+def _rms_lines(cs: list[dict]) -> list[str]:
+    """RMS error of the fixed estimates beside the reference's on the same cases (where the
+    reference resolves the parameter): the ratio the issue bounds at 1.5."""
+    out = []
+    names = sorted({n for c in cs for n in c["truth"]})
+    for name in names:
+        ours, ref = [], []
+        for c in cs:
+            if "result" not in c or not c["result"][name]["fixed"]:
+                continue
+            r = (c.get("reference") or {}).get(name)
+            if not reference_allows(c, name, TOL[c["command"]]) or r is None:
+                continue
+            ours.append(c["result"][name]["value"] - c["truth"][name])
+            ref.append(r["value"] - c["truth"][name])
+        if ours:
+            a = math.sqrt(sum(e * e for e in ours) / len(ours))
+            b = math.sqrt(sum(e * e for e in ref) / len(ref))
+            out.append(f"  {name:7s} RMS error {a:.3f} deg, reference's {b:.3f} deg on the same {len(ours)} cases"
+                       + (f" (ratio {a / b:.2f})" if b > 0 else ""))
+    return out
+
+
 def summarise(cases: list[dict]) -> str:
     lines = []
     by_cmd = defaultdict(list)
@@ -210,9 +234,13 @@ def summarise(cases: list[dict]) -> str:
         counts = defaultdict(lambda: defaultdict(int))
         cover = defaultdict(lambda: [0, 0])
         worst = defaultdict(float)
+        resolved = defaultdict(lambda: [0, 0])
         for c in cs:
             for name, o in outcomes(c).items():
                 counts[name][o] += 1
+                if reference_allows(c, name, TOL[cmd]):
+                    resolved[name][0] += int(o == "right")
+                    resolved[name][1] += 1
                 if o in ("wrong", "silent"):
                     worst[name] = max(worst[name], abs(c["result"][name]["value"] - c["truth"][name]))
             for name, ok in covered(c).items():
@@ -229,10 +257,12 @@ def summarise(cases: list[dict]) -> str:
                          f"wrong {cnt['wrong']}, silent {cnt['silent']} (worst {worst[name]:.2f}), "
                          f"unfixed {unfixed}, refused {refused}; "
                          f"coverage {cov[0]}/{cov[1]}" + (f" ({100 * cov[0] / cov[1]:.1f} %)" if cov[1] else ""))
-            allowed = right + cnt["wrong"] + cnt["silent"] + cnt["unfixed-allowed"] + cnt["refused-allowed"]
-            if any(k.endswith("-allowed") or k.endswith("-beyond") for k in cnt):
-                lines.append(f"          where the reference resolves it: right {right}/{allowed}; not fixed or "
+            if any("reference" in c for c in cs):
+                got, allowed = resolved[name]
+                share = f" ({100 * got / allowed:.1f} %)" if allowed else ""
+                lines.append(f"          where the reference resolves it: right {got}/{allowed}{share}; not fixed or "
                              f"refused where it does not: {cnt['unfixed-beyond'] + cnt['refused-beyond']}")
+        lines += _rms_lines(cs)
         if cmd.startswith("shift"):
             nulls = [c for c in cs if c["truth"]["offset"] == 0.0 and "result" in c]
             if nulls:
@@ -255,9 +285,13 @@ def main() -> None:
     ap.add_argument("--only", choices=COMMANDS, action="append")
     ap.add_argument("--jobs", type=int, default=1)
     ap.add_argument("--cases", type=Path)
+    ap.add_argument("--load", type=Path, nargs="+", help="summarise stored --cases files (pooled) instead of running")
     ap.add_argument("--reference", action="store_true",
                     help="also fit bench/reference.py's form-agnostic reference to every case (slow)")
     args = ap.parse_args()
+    if args.load:
+        print(summarise([json.loads(ln) for f in args.load for ln in f.read_text().splitlines() if ln.strip()]))
+        return
     commands = args.only or list(COMMANDS)
     work = [(args.plants, cmd, s, args.reference) for cmd in commands for s in range(args.seed, args.seed + args.n)]
     t0 = time.perf_counter()
