@@ -451,7 +451,7 @@ class ShiftRow:
                 "shape": self.shape, "offset": r.offset, "true_offset": self.true_offset,
                 "error": self.error, "edge": r.edge, "edge_found_at": r.edge_found_at,
                 "true_edge": self.true_edge, "edge_error": self.edge_error,
-                "transition": r.transition, "start_outside": r.start_outside,
+                "offset_lo": r.offset_lo, "offset_hi": r.offset_hi, "start_outside": r.start_outside,
                 "travel": r.travel, "steps": r.steps}
 
 
@@ -945,7 +945,7 @@ def shift_table(result: ExperimentResult) -> metrics.Table:
     heads = ("catheter", "scenario", "knob", "offset", "true offset", "error", "edge", "found at",
              "true edge", "edge error", "travel")
     rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.true_offset, s.error,
-                  f"{s.result.edge} ({s.result.transition})", s.result.edge_found_at, s.true_edge,
+                  s.result.edge, s.result.edge_found_at, s.true_edge,
                   s.edge_error, s.result.travel) for s in result.shifts)
     return metrics.Table(cols, heads, rows, (
         "Algorithm 1 on the replays",

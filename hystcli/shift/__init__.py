@@ -21,8 +21,20 @@ from ..io import atomic_write
 from ..model import KnobModel, Model
 from .probe import Probe, ProbeSample, ReplayExhausted, ReplayProbe, return_knob
 from .result import Evidence, ShiftResult
-from .search import (DEFAULT_MAX_TRAVEL, Reference, apply_shift, default_max_travel, detect_shift, detect_shifts,
-                     reference_of)
+
+# The search reads the current with the compiled broken-line fits (numba, scipy): loaded on first
+# use, so that what only needs a probe (the device, the command line's start-up) stays light.
+_SEARCH_NAMES = ("DEFAULT_MAX_TRAVEL", "Reference", "apply_shift", "default_max_travel", "detect_shift",
+                 "detect_shifts", "reference_of")
+
+
+def __getattr__(name: str):  # noqa: ANN202 - PEP 562: the search's names, imported when first asked for
+    if name in _SEARCH_NAMES:
+        from . import search
+
+        return getattr(search, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
 
 __all__ = ["DEFAULT_MAX_TRAVEL", "Evidence", "Probe", "ProbeSample", "Reference", "ReplayExhausted", "ReplayProbe",
            "ShiftResult", "apply_shift", "default_max_travel", "detect_shift", "detect_shifts", "plot_shift",
