@@ -26,7 +26,7 @@ def _sweep(delay: float) -> Run:
 
 def test_a_latency_widens_the_identified_loop_and_the_refit_gives_it_back():
     sweep = _sweep(0.2)
-    model = identify(sweep, max_misfit=math.inf, refuse_unfixed=False).model
+    model = identify(sweep).model
     # the sweep's 0.2 s at 40 deg/s is 8 deg of knob: identify sees a much wider loop
     assert model.knob(1).b_pos > TRUE.b_pos + 4.0
     sw = R.prepare_sweep(sweep, model)
@@ -66,7 +66,7 @@ def test_a_two_knob_sweep_carries_a_bend_coupling_and_the_refit_takes_it_off():
     for form in ("input-magnitude", "output-magnitude"):
         eff = E.make_effect("coupling", form, gain=0.1)
         sweep = _two_knob_sweep(eff)
-        model = identify(sweep, max_misfit=math.inf, refuse_unfixed=False).model
+        model = identify(sweep).model
         sw = R.prepare_sweep(sweep, model)
         assert R.carries(eff.type, eff.spec_form, sw)
         kn = R.refit(sw, model, eff)
