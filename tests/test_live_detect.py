@@ -3,10 +3,10 @@
 The robot is `hyst sim-robot` in a subprocess (a real pty, another process: nothing mocked above
 the transport), serving the calibrated catheter `hyst simulate` and the demo use, with its
 default effects unless a test says otherwise; the host is the CLI through typer's CliRunner. The
-model is the catheter's true straight-shaft model with the identification `hyst identify` would
-store (thresholds from the twin's current model), so the only thing under test is the live
-search. The reference shift is computed here from the catheter's tendon geometry by the paper's
-eqs. 1-4, never from an output of detect-shift.
+model is the catheter's true straight-shaft model with what `hyst identify` stores for the search
+(the current's take-ups at the true edges, its levels and slopes from the twin's current model),
+so the only thing under test is the live search. The reference shift is computed here from the
+catheter's tendon geometry by the paper's eqs. 1-4, never from an output of detect-shift.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
+from hystcli.estimate import Estimate
 from hystcli.io import load_model, save_model
 from hystcli.model import KnobIdentification, Model
 from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - test_rotate_shift imports them from here
@@ -43,12 +44,22 @@ def shift_by_eqs_1_4(segments: list[tuple[float, float]]) -> dict[int, float]:
 
 def _model() -> Model:
     """The straight-shaft model of the calibrated ice-a with what identification stores for
-    detect-shift: dead-zone slope ~0.5 mA/deg (noise), loaded slope k_load (twin.CurrentParams,
-    kept by the calibration: 4 mA/deg, loading k_load(1+mu) = 5, unloading k_load(1-mu) = 3),
-    dead-zone current = no-load current (120 mA)."""
+    detect-shift, written from the twin's current model (twin.CurrentParams, kept by the
+    calibration) rather than read from a sweep: each tendon is taken up at the knob's true edge;
+    moving, the motor's Coulomb friction puts the dead zone's current at no-load +- coulomb
+    (126 mA rising, 114 falling), which is where the current stands as each tendon is taken up;
+    loaded, the current rises k_load (1 + mu) = 5 mA per deg."""
     cur = CAT.current
-    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cur.k_load, q_min=-40.0,
-                                   q_max=40.0, current_dead_zone=cur.no_load) for k in (1, 2)}
+    moving_up, moving_down = cur.no_load + cur.coulomb, cur.no_load - cur.coulomb
+    ident = {}
+    for k, km in CAT.knobs.items():
+        ident[k] = KnobIdentification(
+            q_min=-40.0, q_max=40.0, method="given", current_sign="signed",
+            current_edges={"pos": Estimate(km.d_pos, km.d_pos - 0.05, km.d_pos + 0.05),
+                           "neg": Estimate(km.d_neg, km.d_neg - 0.05, km.d_neg + 0.05)},
+            no_load_rising=moving_up, no_load_falling=moving_down,
+            slope_loaded_pos=cur.k_load * (1 + cur.mu), slope_loaded_neg=cur.k_load * (1 + cur.mu),
+            edge_level_pos=moving_up, edge_level_neg=moving_down)
     return Model(dict(CAT.knobs), CAT.geometry, meta={"catheter": CAT.name}, identification=ident)
 
 
