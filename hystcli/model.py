@@ -612,7 +612,7 @@ class Model:
     effects : tuple of EffectSpec
         Unmodelled effects added by ``hyst diagnose``.
     meta : mapping
-        Free-form provenance (catheter, source, sha256, created).
+        Free-form provenance (catheter, source, sha256, source_modified).
     identification : mapping of int to KnobIdentification
         What identification learnt per knob (current-slope levels, range, uncertainties).
     """

@@ -1,7 +1,7 @@
 """Options shared by the commands that talk to a robot or write what it will play.
 
 ``play``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate`` declare their
-limits, reply deadline and table/json output from here, so that one option means one thing
+limits and reply deadline from here, so that one option means one thing
 (and has one default, with its reason) everywhere. Every number is checked when parsed: a
 non-finite or non-positive value is a usage error (exit 2), never a traceback or a silently
 ignored limit (``nan`` passes a plain ``min=`` bound).
@@ -9,7 +9,6 @@ ignored limit (``nan`` passes a plain ``min=`` bound).
 from __future__ import annotations
 
 import math
-from enum import Enum
 from typing import Annotated, Optional
 
 import typer
@@ -31,13 +30,6 @@ def finite(value: float | None) -> float | None:
     return value
 
 
-class TableOrJson(str, Enum):
-    table = "table"
-    json = "json"
-
-
-FormatTJOpt = Annotated[TableOrJson, typer.Option("--format", "-f", help="Output format on stdout.")]
-
 TimeoutOpt = Annotated[float, typer.Option(
     "--timeout", callback=positive,
     help="Deadline of each reply from the robot, s, beyond the motion's own duration and any "
@@ -49,11 +41,18 @@ TravelLimitOpt = Annotated[float, typer.Option(
          "limit gets its own.")]
 MaxSpeedOpt = Annotated[float, typer.Option(
     "--max-speed", callback=positive,
+    help="Largest knob speed, deg/s. The default is one knob turn a second: the paper's motions "
+         "need at most 40 and a geared knob motor does a few hundred. A robot that announces a "
+         "lower top speed gets its own.")]
+InverseMaxSpeedOpt = Annotated[float, typer.Option(
+    "--max-speed", callback=positive,
     help="Largest knob speed between samples, deg/s. The default is one knob turn a second: the "
          "paper's motions need at most 40 and a geared knob motor does a few hundred, while the "
          "inverse model's jump across the dead zone or the backlash asks for up to ~40 deg within "
          "one sample (3942 deg/s at 100 Hz). A robot that announces a lower top speed gets its "
          "own.")]
+"""``--max-speed`` of the commands that play the inverse model's commands (compensate, track, play),
+whose help says why they may exceed it."""
 MaxAccelOpt = Annotated[Optional[float], typer.Option(
     "--max-accel", callback=positive,
     help="Largest knob acceleration, deg/s^2 (default: reported, not limited).")]

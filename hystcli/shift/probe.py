@@ -109,6 +109,7 @@ class ReplayProbe:
         self.average = bool(average)
         self._q = np.asarray(run[qn], dtype=float)
         self._c = np.asarray(run[cn], dtype=float)
+        self._t = np.asarray(run["t"], dtype=float) if "t" in run else np.arange(self._q.size, dtype=float)
         self._y = np.asarray(run[yn], dtype=float) if yn in run else None
         dq = np.abs(np.diff(self._q))
         self._path = np.concatenate([[0.0], np.cumsum(dq)])
@@ -202,6 +203,17 @@ class ReplayProbe:
         """Knob travel of the record walked so far (deg); more than the search's own travel
         when the search asked for a direction the record was not moving in."""
         return float(self._path[self._i] + self._frac * (self._path[self._i + 1] - self._path[self._i]))
+
+    @property
+    def mark(self) -> int:
+        """Where in the record the walk stands (for :meth:`samples_since`)."""
+        return self._i
+
+    def samples_since(self, mark: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The recorded samples ``(q, current, t)`` the walk has passed since ``mark``: a replay
+        holds every sample between the steps, which a search may read in full."""
+        j = self._i + 1
+        return self._q[mark:j].copy(), self._c[mark:j].copy(), self._t[mark:j].copy()
 
     def _sample_here(self) -> ProbeSample:
         i, f = self._i, self._frac

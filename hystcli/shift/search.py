@@ -54,8 +54,9 @@ DEFAULT_MAX_TRAVEL = 25.0
 MIN_READINGS = 5
 """Fewest readings since the last turn before the search reads them (a broken line needs them)."""
 
-MAX_REFINE = 16
-"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel)."""
+MAX_REFINE = 40
+"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel: the
+contact slope and the travel limit stop it sooner)."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,8 @@ class Reference:
     eps_upper: float | None
     ripple: Any = None
     at_rest_spread: float = 0.0
+    dead_slope: float = 0.0
+    noise: float = 0.0
 
 
 def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN202
@@ -85,7 +88,7 @@ def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN
         return Estimate(tip_edge, tip_edge, tip_edge), "model", ""
     ce = ident.current_edges.get(side)
     if ce is None or not ce.fixed:
-        why = "it did not show" if ce is None else "it left open"
+        why = "did not show" if ce is None else f"did not fix ({ce.reason})"
         return None, "current", (f"the identification sweep's current {why} where the {side} tendon is taken up, "
                                  f"so an offset from that side has no reference")
     tip_est = ident.estimates.get(name)
@@ -123,8 +126,10 @@ def reference_of(model: Model, knob: int, settings: Settings = DEFAULT, *,
         ripple = ident.ripple
     if eps_upper is None and slope > 0:
         eps_upper = settings.contact_factor * slope
+    dead = 0.0 if ident is None else float(ident.slope_dead_zone)
+    noise = 0.0 if ident is None or ident.current_noise is None else float(ident.current_noise)
     return Reference(sign=sign, edges=edges, kinds=kinds, why_not=why, edge_level=levels, slope_loaded=slope,
-                     eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
+                     dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
 
 
 def default_max_travel(model: Model, knob: int) -> float:
@@ -190,9 +195,11 @@ class _Search:
     skipped: dict = field(default_factory=dict)
     turns: int = 0
     limits: int = 0
+    seg_mark: int | None = None
 
     def __post_init__(self) -> None:
         self.start = float(self.probe.position())
+        self.seg_mark = getattr(self.probe, "mark", None)
         self.z = NormalDist().inv_cdf(0.5 + 0.5 * self.settings.level)
         self.at_rest = not getattr(self.probe, "reads_moving", True)
 
@@ -232,12 +239,19 @@ class _Search:
         self.direction = -self.direction
         self.turns += 1
         self.seg_q, self.seg_c = self.seg_q[-1:], self.seg_c[-1:]
+        self.seg_mark = getattr(self.probe, "mark", None)
 
     # -- level tests ------------------------------------------------------------------------
     def _band(self, noise: float) -> float:
-        """How far from the sweep's take-up level a take-up may read (mA)."""
+        """How far from the sweep's take-up level a take-up may read (mA).
+
+        A bend moves the take-up along the knob, not the current it happens at: the readings'
+        noise and the sweep's (at the settings' level), the dead zone's own tilt over the widest
+        gap allowed between two readings of one edge, and, for readings taken at rest, the span of
+        the motor's static friction between the two directions' levels."""
         spread = self.ref.at_rest_spread if self.at_rest else 0.0
-        return self.z * noise + self.ref.slope_loaded * self.settings.max_edge_gap + spread
+        return (self.z * math.hypot(noise, self.ref.noise) + abs(self.ref.dead_slope) * self.settings.max_edge_gap
+                + spread)
 
     def _load(self, c: float, d: int) -> float:
         return orientation(self.ref.sign, d) * c
@@ -351,8 +365,9 @@ class _Search:
 
     def _refine(self, edge: _Edge) -> _Edge:
         """More readings past the edge until its offset is known well enough or the search can go
-        no further (a contact, a limit, the budget)."""
-        best = edge
+        no further (a contact, a limit, the budget); each time the edge is placed again on every
+        sample the probe keeps (:meth:`_read_record`), or on the readings."""
+        best = self._read_record(edge)
         for _ in range(MAX_REFINE):
             if _offset_halfwidth(best, self.ref) <= self.settings.max_offset_halfwidth:
                 break
@@ -365,8 +380,38 @@ class _Search:
                 break
             got, _ = self._read_segment()
             if got is not None and got.direction == edge.direction:
-                best = got
+                best = self._read_record(got)
         return best
+
+    def _read_record(self, edge: _Edge) -> _Edge:
+        """The edge placed again on every sample the probe passed since the last turn, where the
+        probe keeps them (a replay holds the whole record between the steps): the same broken
+        line, read on all the samples instead of one median per step."""
+        if self.seg_mark is None or not hasattr(self.probe, "samples_since"):
+            return edge
+        from ..signal.reading import bin_stretch
+
+        q, c, t = self.probe.samples_since(self.seg_mark)
+        d = edge.direction
+        keep = d * np.diff(q, prepend=q[0]) >= 0
+        if keep.sum() < 3 * MIN_READINGS:
+            return edge
+        if self.ref.ripple is not None:
+            c = c - self.ref.ripple(q)
+        x, y, w, _ = bin_stretch(d * q[keep], c[keep], t[keep], self.settings.filter_hz)
+        order = np.argsort(x, kind="stable")
+        x, y, w = x[order], y[order], w[order]
+        fit = fit_piecewise(x, y, w, max_pieces=min(self.settings.max_pieces, 4))
+        _, j, _ = _classify(fit, self.ref.sign, d, self.z)
+        if j is None or abs(d * fit.knots[j] - edge.at) > max(edge.hi - edge.lo, 2.0 * self.step):
+            return edge
+        lo, hi = knot_interval(fit, j, self.settings.chi2)
+        a, b = d * lo, d * hi
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return edge
+        return _Edge(direction=d, at=d * fit.knots[j], lo=min(a, b), hi=max(a, b), statistic=edge.statistic,
+                     threshold=edge.threshold, level=edge.level, slope_before=edge.slope_before,
+                     slope_after=edge.slope_after, n_before=edge.n_before, n_after=edge.n_after, noise=edge.noise)
 
 
 def _threshold(false_alarm: float, n: int, max_steps: int, dof: int) -> float:
@@ -394,7 +439,7 @@ def _offset_interval(edge: _Edge, ref: Reference) -> tuple[float, float]:
 
 def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings = DEFAULT,
                  eps_upper: float | None = None, step: float = 0.5, max_steps: int | None = None,
-                 max_travel: float | None = None, direction: int = 1, return_home: bool = True,
+                 max_travel: float | None = None, direction: int | None = None, return_home: bool = True,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
     """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
@@ -413,8 +458,9 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         Unit step :math:`u` (deg).
     max_steps, max_travel : optional
         Step and travel limits (default: room to cross the dead zone and back; the sweep's reach).
-    direction : int
-        Initial direction (+1 as in the paper, or -1).
+    direction : int, optional
+        Initial direction (+1 as in the paper, or -1); default the way a replay's record goes first
+        (a search the other way would walk the record through its own turn), else +1.
     return_home : bool
         Return the knob to where it began after a successful search too (a failed one always does).
     progress : callable, optional
@@ -430,6 +476,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     k = int(knob)
     km = model.knob(k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
+    if direction is None:
+        direction = int(getattr(probe, "first_direction", 1))
     max_travel = default_max_travel(model, k) if max_travel is None else float(max_travel)
     _check_options(step, max_travel, max_steps, direction)
     if not ref.edges:

@@ -80,9 +80,9 @@ class StretchReading:
         Its interval.
     after_loaded_reversal : bool
         The stretch begins at a reversal where the tendon behind was loaded (past its edge).
-    complete : bool
-        The stretch runs from one reversal to the next (not the record's first, whose start state
-        the record cannot tell, nor its last, cut short).
+    from_reversal : bool
+        The stretch begins at a reversal (not the record's first, whose start state the record
+        cannot tell).
     """
 
     start: int
@@ -98,7 +98,7 @@ class StretchReading:
     hold_lo: float = math.nan
     hold_hi: float = math.nan
     after_loaded_reversal: bool = False
-    complete: bool = False
+    from_reversal: bool = False
 
 
 @dataclass(frozen=True)
@@ -295,12 +295,24 @@ def _stretch_points(q, c, t, a, b, d, band_hz, ring_s):  # noqa: ANN001
     return bin_stretch(d * q[a:b + 1][keep], c[a:b + 1][keep], tt[keep], band_hz)
 
 
-def _knot_q(fit: Piecewise, j: int, d: int, chi2: float) -> tuple[float, float, float]:
-    """A knot in knob degrees with its interval."""
+def _knot_q(fit: Piecewise, j: int, d: int, chi2: float, blur: float = 0.0) -> tuple[float, float, float]:
+    """A knot in knob degrees with its interval, each side widened (in quadrature) by ``blur``."""
     lo, hi = knot_interval(fit, j, chi2)
     at = d * fit.knots[j]
-    a, b = d * lo, d * hi
-    return at, min(a, b), max(a, b)
+    a, b = sorted((d * lo, d * hi))
+    return at, at - math.hypot(at - a, blur), at + math.hypot(b - at, blur)
+
+
+def _blur(q: np.ndarray, t: np.ndarray, a: int, b: int, d: int, x_knot: float, band: float | None) -> float:
+    """How far (deg of knob) the low-pass the current was read through spreads a kink: the knob's
+    speed there times the filter's time constant ``1 / (2 pi band)``. No reading places a kink
+    more finely than the filter lets it show, however many samples lie around it."""
+    if not band or b - a < 2:
+        return 0.0
+    x = d * q[a:b + 1]
+    v = np.abs(np.gradient(q[a:b + 1], t[a:b + 1]))
+    order = np.argsort(x, kind="stable")
+    return float(np.interp(x_knot, x[order], v[order])) / (2.0 * math.pi * band)
 
 
 # --------------------------------------------------------------------------------------------
@@ -397,10 +409,9 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, settings: Settings
     stretches = []
     for i, ((a, b, d), fit) in enumerate(zip(spans, fits)):
         dead, edge, hold = _classify(fit, sign, d, z)
-        kw: dict = dict(start=a, stop=b, direction=d, fit=fit, dead=dead, edge=None,
-                              complete=(0 < i < len(spans) - 1))
+        kw: dict = dict(start=a, stop=b, direction=d, fit=fit, dead=dead, edge=None, from_reversal=i > 0)
         if edge is not None:
-            at, lo, hi = _knot_q(fit, edge, d, chi2)
+            at, lo, hi = _knot_q(fit, edge, d, chi2, _blur(q, t, a, b, d, fit.knots[edge], settings.filter_hz))
             kw.update(edge=edge, edge_at=at, edge_lo=lo, edge_hi=hi)
         if hold is not None:
             x_start = d * q[a]
@@ -490,9 +501,11 @@ def _ripple(q, spans, fits, sign, z) -> Ripple | None:  # noqa: ANN001
     if not qs:
         return None
     step = float(np.median(np.abs(np.diff(q)))) if q.size > 1 else 0.01
+    spacing = float(np.median(np.concatenate([np.abs(np.diff(x)) for x in qs if x.size > 1]) if qs else [0.0]))
+    # a wave shorter than four points' spacing is aliasing, not cogging
     return find_ripple(np.concatenate(qs), np.concatenate(rs), np.concatenate(ws),
                        scale=float(np.median([f.scale for f in fits])), tau=float(np.median(taus)),
-                       shortest=max(8.0 * step, 0.3))
+                       shortest=max(8.0 * step, 4.0 * spacing, 0.3))
 
 
 def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> CurrentReading:  # noqa: ANN001
@@ -506,9 +519,11 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     for side, d in (("pos", 1), ("neg", -1)):
         seen = _confirmed([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
                           [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
-        # stretches from reversal to reversal: the record's first starts from a state it cannot
-        # tell, its last is cut short; they stand in only where no complete stretch shows the edge
-        mine = [s for s in seen if s.complete] or seen
+        # the record's first stretch starts from a state the record cannot tell (a tip held above
+        # its plateau is taken up early): it stands in only where no other shows the edge, and
+        # then fixes nothing
+        mine = [s for s in seen if s.from_reversal] or seen
+        first_only = bool(mine) and not mine[0].from_reversal
         if not mine:
             notes[f"d_{side}"] = (f"no stretch of the record takes the {'positive' if d > 0 else 'negative'} "
                                   "tendon up from the dead zone (the current never steepens past a flat "
@@ -520,6 +535,12 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
             reason = None
             if not closed:
                 reason = "the current's take-up is seen too close to where the stretches end"
+            if first_only:
+                closed, reason = False, ("only the record's first stretch shows the take-up, from a start state "
+                                         "the record cannot tell: sweep a whole cycle past that edge")
+            elif closed and max(v - lo, hi - v) > settings.max_fixed_halfwidth:
+                closed, reason = False, (f"the current places the take-up only to [{lo:.2f}, {hi:.2f}] deg "
+                                         + ("(its stretches disagree)" if p < 1.0 - settings.level else ""))
             edges[side] = Estimate(v, lo, hi, settings.level, closed, reason)
             if p < 1.0 - settings.level and len(mine) > 1:
                 notes[f"d_{side}"] = (f"the stretches place the take-up differently "
@@ -548,7 +569,11 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
             v, lo, hi, _ = combine([s.hold for s in held], [s.hold_lo for s in held], [s.hold_hi for s in held],
                                    z, settings.level)
             lo = max(lo, 0.0)
-            backlash[b_side] = Estimate(max(v, 0.0), lo, hi, settings.level, math.isfinite(hi), None)
+            v = max(v, 0.0)
+            sharp = math.isfinite(hi) and max(v - lo, hi - v) <= settings.max_fixed_halfwidth
+            backlash[b_side] = Estimate(v, lo, hi, settings.level, sharp,
+                                        None if sharp else f"the current places the held load's end only to "
+                                                           f"[{lo:.2f}, {hi:.2f}] deg")
         elif held:
             notes[name] = (f"{len(held)} of the {len(after)} stretches after a loaded reversal show the load held, "
                            "the others none: the current does not fix the backlash")
