@@ -214,7 +214,7 @@ def test_a_side_whose_current_edge_the_sweep_left_open_gives_no_offset():
                 "neg": Estimate(-5.0, -5.05, -4.95)}
     model = law_model(open_pos)
     ref = reference_of(model, 1)
-    assert set(ref.edges) == {-1} and "left open" in ref.why_not[1]
+    assert set(ref.edges) == {-1} and "did not fix" in ref.why_not[1]
     p = LawProbe(-6.0, 8.0)
     r = detect_shift(model, p, 1)
     assert r.edge == "neg" and abs(r.offset + 1.0) <= 0.1 and p.q == 0.0
