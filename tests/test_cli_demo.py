@@ -56,6 +56,7 @@ def test_usage_error_exits_2(tmp_path):
     assert res.exit_code == 2
 
 
+@pytest.mark.slow
 def test_demo_json_and_files(tmp_path):
     out = tmp_path / "o"
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--format", "json", "--out", str(out),
@@ -98,6 +99,7 @@ def test_demo_markdown_shows_paper_beside_ours(tmp_path):
     assert "demo took" in res.stderr
 
 
+@pytest.mark.slow
 def test_demo_without_diagnosis_has_only_the_papers_tables(tmp_path):
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--no-diagnose", "--out",
                               str(tmp_path / "o"), "--no-figures"])

@@ -165,6 +165,7 @@ def robot():
     srv.shutdown()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words, back", [
     (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR", True),
     (Fault("garble", at=10), "checksum mismatch", True),
@@ -495,6 +496,7 @@ def test_sweep_writes_the_papers_identification_sweep(tmp_path):
     assert res.exit_code == 2 and not (tmp_path / "bad.csv").exists()
 
 
+@pytest.mark.slow
 def test_identify_on_a_sweep_played_on_the_robot(tmp_path):
     """Job 1 on a live robot: `hyst sweep`, `hyst play` on `hyst sim-robot`, `hyst identify` on
     the recording. The bare model (no unmodelled effects) is identified to within a few tenths of

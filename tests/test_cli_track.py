@@ -116,6 +116,7 @@ def _angle(port: str) -> float:
     return json.loads(res.stdout)["knobs"]["1"]["angle"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words, back", [
     (Fault("garble", at=10), "checksum mismatch", True),
     (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR", True),
@@ -224,6 +225,7 @@ def test_detect_shift_first_tracks_with_the_detected_offset(tmp_path):
     assert np.sqrt(np.mean((run["y1"] - run["r1"]) ** 2)) < 1.0
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_hyst_track_returns_the_knob(files, tmp_path):
     """The user's Ctrl-C: `hyst track` in a subprocess, paced through a 10 s reference on `hyst
     sim-robot`, gets SIGINT a second after it started: exit 130 (as `hyst play`), one line that

@@ -102,6 +102,7 @@ def test_the_sample_sweep_gives_the_loop_that_predicts_it(sample):
     assert set(fit.ident.current_edges) == {"pos", "neg"}
 
 
+@pytest.mark.slow
 def test_the_same_protocol_without_the_effects_is_recovered_within_every_interval():
     # the calibrated ice-a's knob 1 on the paper's sweep (+-40 deg, 2 cycles, 40 deg/s, 1 kHz),
     # the tracker's noise and filter, no unmodelled effect: the loop is the truth, and every
@@ -174,6 +175,7 @@ def test_the_model_file_keeps_the_estimates_and_the_current_edges(sample, tmp_pa
 # --------------------------------------------------------------------------------------------
 # what the record cannot fix is an interval; what it cannot show at all is a refusal
 # --------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_a_backlash_plateau_the_tip_never_leaves_is_an_open_interval_not_a_refusal():
     # example-a knob 1 swept -40..12: at the top reversal the tip has risen to 1.45 (12 - 9.1)
     # - 4.0 = 0.2 deg, below the falling dead zone's height 4.2, so coming down it stays put until
@@ -182,8 +184,8 @@ def test_a_backlash_plateau_the_tip_never_leaves_is_an_open_interval_not_a_refus
     fit = identify(example_run(-40.0, 12.0)).fits[1]
     true = EXAMPLE_A.knobs[1]
     b = fit.estimates["b_pos"]
-    assert not b.fixed and b.reason and b.contains(true.b_pos)
-    assert b.hi - b.lo > 2.0
+    assert not b.fixed and b.reason and b.hi - b.lo > 2.0
+    assert b.contains(true.b_pos)    # b_pos does not change the record's prediction at all
     assert any("does not fix b_pos" in w for w in fit.warnings)
     # what the record does show stays fixed and right
     for name in ("d_pos", "b_neg", "omega", "h_pos"):
@@ -193,6 +195,7 @@ def test_a_backlash_plateau_the_tip_never_leaves_is_an_open_interval_not_a_refus
     assert fit.rmse < 0.1
 
 
+@pytest.mark.slow
 def test_a_sweep_that_stops_short_of_an_edge_leaves_it_open():
     # up to 8 deg only: the positive edge (9.1) is never reached
     fit = identify(example_run(-40.0, 8.0)).fits[1]
@@ -201,6 +204,7 @@ def test_a_sweep_that_stops_short_of_an_edge_leaves_it_open():
     assert fit.estimates["b_neg"].fixed
 
 
+@pytest.mark.slow
 def test_a_wall_is_clipped_with_a_warning_and_the_free_loop_recovered():
     # an independent zoo plant whose tip meets a rigid wall on its positive side at 4.92 deg
     case = plants.sweep_case(669)
@@ -213,6 +217,7 @@ def test_a_wall_is_clipped_with_a_warning_and_the_free_loop_recovered():
         assert e.fixed and abs(e.value - getattr(case.truth, name)) <= 0.1, (name, e)
 
 
+@pytest.mark.slow
 def test_one_cycle_started_at_rest_is_enough():
     # rest -> +40 -> -40 -> rest: no complete ascending branch, yet the output-error fit sees both
     # edges and both backlash plateaus
@@ -222,6 +227,7 @@ def test_one_cycle_started_at_rest_is_enough():
         assert e.fixed and abs(e.value - getattr(true, name)) <= 0.05, (name, e)
 
 
+@pytest.mark.slow
 def test_y0_is_the_first_measured_tip_angle():
     # crop the paper's sweep at its first descending zero crossing (t = pi): the tip then sits on
     # the descending dead zone at h_neg = 4.2 deg (example-a knob 1), not at the straight tip
@@ -283,10 +289,12 @@ def test_random_twins_are_recovered_by_the_tip_and_by_the_current(i):
             tol = 0.02 * true.omega if name == "omega" else 0.5
             assert e.contains(getattr(true, name)) or abs(e.value - getattr(true, name)) <= tol, (k, name, e)
         # the current alone: the edges where each tendon is taken up, the backlash where the
-        # twin's held load after a reversal ends, within a degree
+        # twin's held load after a reversal ends, within a degree; where the current blurs the
+        # held load's end, an interval that holds the truth
         for name in ("d_pos", "d_neg", "b_pos", "b_neg"):
             e = cur.fits[k].estimates[name]
-            assert e.fixed and abs(e.value - getattr(true, name)) <= 1.0, (k, name, e)
+            assert (e.fixed and abs(e.value - getattr(true, name)) <= 1.0) or \
+                (not e.fixed and e.contains(getattr(true, name))), (k, name, e)
 
 
 def test_stored_levels_for_detect_shift():
@@ -391,6 +399,7 @@ def test_constant_signals_and_too_few_samples():
         identify(short)
 
 
+@pytest.mark.slow
 def test_knob_columns_and_arguments():
     good = paper_sweep(EXAMPLE_A, 0, knobs=(1,))
     no_c = Run({"t": good["t"], "q1": good["q1"], "y1": good["y1"]}, source="s.csv")
@@ -425,6 +434,7 @@ def test_check_sweep_reports_reversals():
     assert chk.n_cycles == 1
 
 
+@pytest.mark.slow
 def test_identify_is_deterministic():
     run = example_run(-40.0, 40.0, cycles=1.0)
     a, b = identify(run), identify(run)

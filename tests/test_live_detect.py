@@ -109,6 +109,7 @@ def test_geometry_is_the_one_the_reference_uses():
 CASES = [(*s, "default") for s in SHAPES] + [(*SHAPES[2], "none")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape,segments,seed,effects", CASES, ids=[f"{c[0]}-{c[3]}" for c in CASES])
 def test_detect_shift_live_matches_true_shift(model_path, tmp_path, shape, segments, seed, effects):
     true = shift_by_eqs_1_4(segments)
@@ -128,6 +129,7 @@ def test_detect_shift_live_matches_true_shift(model_path, tmp_path, shape, segme
     assert shifted.meta["shift_source"] == f"live:{path}"
 
 
+@pytest.mark.slow
 def test_shorter_hold_and_window_are_options_and_are_checked(model_path, tmp_path):
     # a 0.2 s hold averaged over its last 0.15 s still settles the 25 ms tendon lag and the
     # 16 ms filter delay; straight shaft: the true shift is 0 on both knobs
@@ -146,6 +148,7 @@ def test_shorter_hold_and_window_are_options_and_are_checked(model_path, tmp_pat
     assert not (tmp_path / "x.json").exists()
 
 
+@pytest.mark.slow
 def test_detect_shift_live_returns_knobs_home(model_path, tmp_path):
     """After a successful search both knobs are back where they began (0 deg), read by a fresh
     connection to the same device."""
@@ -174,6 +177,7 @@ FAULTS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault,words,alive", FAULTS, ids=[f[0] for f in FAULTS])
 def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive):
     out = tmp_path / "shifted.json"
@@ -202,6 +206,7 @@ def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive
         stop(proc)
 
 
+@pytest.mark.slow
 def test_contact_spike_cli_stops_and_writes_nothing(model_path, tmp_path):
     """A 5000 mA current spike (contact) mid-search: the CLI must stop, return the knob, exit 1
     and write nothing (issue 4: 'current ceiling as contact')."""
@@ -248,6 +253,7 @@ def test_contact_spike_live_probe_safety_stop():
 # ---------------------------------------------------------------------------------------------
 # the reply deadline and the connection (issue 12)
 # ---------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_timeout_is_the_reply_deadline(model_path, tmp_path):
     """The 3rd MOVE is answered 1.5 s late: with --timeout 0.5 its deadline (0.5 s + the
     0.35 s dwell + 0.1 s of motion) passes first and the search stops, saying the deadline;

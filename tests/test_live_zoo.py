@@ -80,6 +80,7 @@ def test_live_search_refuses_an_edge_it_cannot_place(seed, direction):
     assert offset is None, (seed, direction, offset, truth)
 
 
+@pytest.mark.slow
 def test_detect_shift_on_sim_robot_serving_an_independent_plant(tmp_path):
     # the command line against `hyst sim-robot --zoo` in its own process, as a user runs it, on
     # the tip-load plant the search reads right both ways

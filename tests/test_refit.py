@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from hystcli import effects as E
 from hystcli import refit as R
@@ -24,6 +25,7 @@ def _sweep(delay: float) -> Run:
     return Run({"t": t, "q1": q, "y1": y})
 
 
+@pytest.mark.slow
 def test_a_latency_widens_the_identified_loop_and_the_refit_gives_it_back():
     sweep = _sweep(0.2)
     model = identify(sweep).model
@@ -62,6 +64,7 @@ def _two_knob_sweep(eff: E.Effect) -> Run:
                 "y2": ys[2] + rng.normal(0.0, 0.05, t.size)})
 
 
+@pytest.mark.slow
 def test_a_two_knob_sweep_carries_a_bend_coupling_and_the_refit_takes_it_off():
     for form in ("input-magnitude", "output-magnitude"):
         eff = E.make_effect("coupling", form, gain=0.1)
