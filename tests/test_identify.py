@@ -365,15 +365,14 @@ def test_identify_current_sign_is_read_or_taken_as_told(tmp_path):
 
 
 def test_a_refused_record_is_one_error_line_and_no_file(tmp_path):
-    # the current alone, on a sweep that never leaves example-a's dead zone [-8.7, 9.1]: no
-    # tendon is ever taken up, so there is no edge to read
-    write_run(tmp_path / "inside.csv", example_run(-6.0, 6.0))
+    # a drive that logged a constant current: nothing to read a tendon from
+    t, q = sine_sweep(-40.0, 40.0)
+    write_run(tmp_path / "flat.csv", Run({"t": t, "q1": q, "c1": np.full(t.size, 120.0)}))
     out = tmp_path / "m.json"
-    res = runner.invoke(app, ["identify", str(tmp_path / "inside.csv"), "--current-only", "-o", str(out)])
+    res = runner.invoke(app, ["identify", str(tmp_path / "flat.csv"), "--current-only", "-o", str(out)])
     assert res.exit_code == 1 and "Traceback" not in res.output
     errors = [ln for ln in res.stderr.splitlines() if ln.startswith("Error:")]
-    assert len(errors) == 1 and "the motor current shows no tendon taken up" in errors[0], res.stderr
-    assert "sweep further" in errors[0]
+    assert len(errors) == 1 and "current c1 is constant" in errors[0], res.stderr
     assert not out.exists()
 
 

@@ -273,15 +273,16 @@ def test_bad_search_options_are_refused_before_the_knob_moves():
         assert p.moves == []
 
 
-def test_the_default_travel_limit_is_the_sweeps_reach_and_half_the_dead_zone():
-    # reach 38 deg, dead zone [-5, 9]: 38 + 7 = 45 deg (a taut start crosses the dead zone)
+def test_the_default_travel_limit_is_twice_the_sweeps_reach_and_half_the_dead_zone():
+    # reach 38 deg, dead zone [-5, 9]: a bend moves the edges by up to the reach again, and a taut
+    # start crosses the dead zone: 2 x 38 + 7 = 83 deg
     model = law_model(q_range=(-35.0, 38.0))
-    assert default_max_travel(model, 1) == 45.0
+    assert default_max_travel(model, 1) == 83.0
     assert default_max_travel(Model({1: STRAIGHT}), 1) == DEFAULT_MAX_TRAVEL == 25.0
-    p = LawProbe(-60.0, 60.0)
-    with pytest.raises(ShiftDetectionError, match=r"travel limit \(45 deg from 0\)"):
+    p = LawProbe(-90.0, 90.0)
+    with pytest.raises(ShiftDetectionError, match=r"travel limit \(83 deg from 0\)"):
         detect_shift(model, p, 1)
-    assert max(p.moves[:-1]) == 45.0 and min(p.moves[:-1]) >= -45.0
+    assert max(p.moves[:-1]) == 83.0 and min(p.moves[:-1]) >= -83.0
 
 
 def test_a_wall_is_never_pressed_more_than_a_step_and_the_knob_comes_back():
