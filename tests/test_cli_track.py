@@ -206,9 +206,9 @@ def test_detect_shift_first_tracks_with_the_detected_offset(tmp_path):
     without its geometry: the reference names no shape, so the offset can only come from the
     search. By hand (paper eqs. 1-4, ice-a: tendons 1.83 mm off axis, 6 mm pulley): 1.83 / 6 * 45
     = 13.725 deg."""
-    from test_live_detect import _model
+    from test_live_detect import ice_a_model
 
-    live = _model()
+    live = ice_a_model()
     save_model(tmp_path / "model.json", Model(live.knobs, None, identification=live.identification))
     t, r = periodic(amplitude=60.0, freq=0.5, cycles=1.0, fs=50.0)
     write_run(tmp_path / "ref.csv", Run({"t": t, "r1": r}, {"motion": "periodic"}))

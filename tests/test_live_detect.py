@@ -42,7 +42,7 @@ def shift_by_eqs_1_4(segments: list[tuple[float, float]]) -> dict[int, float]:
     return {1: k * s1, 2: k * s2}
 
 
-def _model() -> Model:
+def ice_a_model() -> Model:
     """The straight-shaft model of the calibrated ice-a with what identification stores for
     detect-shift, written from the twin's current model (twin.CurrentParams, kept by the
     calibration) rather than read from a sweep: each tendon is taken up at the knob's true edge;
@@ -66,7 +66,7 @@ def _model() -> Model:
 @pytest.fixture(scope="module")
 def model_path(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("live") / "model.json"
-    save_model(path, _model())
+    save_model(path, ice_a_model())
     return path
 
 
@@ -240,7 +240,7 @@ def test_contact_spike_live_probe_safety_stop():
         probe = open_probe(server.path, knob=1, timeout=float(TIMEOUT), current_ceiling=2000.0)
         try:
             with pytest.raises(SafetyStop, match=r"ceiling 2000 mA.*returned to 0 deg"):
-                detect_shift(_model(), probe, 1)
+                detect_shift(ice_a_model(), probe, 1)
             assert server.emulator.stops >= 1
             assert server.emulator.moves == 6  # 5 steps + the move home, nothing after the spike
             assert abs(probe.device.state(1).angle) < 1e-3

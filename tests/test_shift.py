@@ -192,7 +192,7 @@ def test_without_return_home_the_knob_stays_where_the_search_ended():
 
 
 @pytest.mark.parametrize("dn,edge", [
-    (-20.0, "neg"),    # the positive tendon taut at 0 by 6 deg (150 mA at rest): turn, cross to -20
+    (-20.0, "neg"),    # the positive tendon taut at 0 by 6 deg (30 mA over no-load): turn, cross to -20
     (6.0, "pos"),      # the negative tendon taut at 0 by 6 deg: going up unloads it, then the dead zone
 ])
 def test_a_start_with_a_tendon_taut(dn, edge):
