@@ -224,6 +224,7 @@ def test_play_interrupted_without_return_holds_and_says_where(robot, commands):
         assert dev.state(1).angle == pytest.approx(where, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_hyst_play_returns_the_knob(tmp_path):
     """The user's Ctrl-C: `hyst play` in a subprocess, paced through a 12.6 s sweep on `hyst
     sim-robot`, gets SIGINT once it has checked the file and started: exit 130, one line that

@@ -56,6 +56,7 @@ def _evaluate_rmse(path: Path) -> float:
     return json.loads(res.stdout)["runs"][0]["rmse"]
 
 
+@pytest.mark.slow
 def test_track_on_sim_robot_logs_what_compensate_and_simulate_say(files, tmp_path):
     # the commands hyst compensate writes for the reference (batch inverse, another code path)
     cmds = tmp_path / "cmds.csv"
