@@ -242,17 +242,30 @@ def _tip_path(q: np.ndarray, y: np.ndarray, t: np.ndarray, chk: SweepCheck, sett
 def _refuse_static(q: np.ndarray, y: np.ndarray, fit: TipFit, where: str) -> None:
     """Refuse a record whose tip a constant or a static line predicts as well as the loop (BIC).
 
-    The three models are scored on the fit's samples with the loop's noise scale and correlation
-    time: a constant (1 parameter), a line through the record (2), the loop (8, its walls more).
+    The three models are scored alike: on the fit's samples, with the loop's soft-L1 loss, noise
+    scale and correlation time, each fitted under that loss: a constant (1 parameter), a line
+    through the record (2), the loop (8, its walls more).
     """
+    from scipy.optimize import least_squares
+
     qf, yf = fit.q, fit.y
-    var = max(fit.noise, 1e-9) ** 2 * max(fit.tau, 1.0)
-    n_eff = max(qf.size / max(fit.tau, 1.0), 2.0)
-    a = np.column_stack([np.ones_like(qf), qf])
-    coef, *_ = np.linalg.lstsq(a, yf, rcond=None)
-    bic_line = float(np.sum((a @ coef - yf) ** 2)) / var + 2 * math.log(n_eff)
-    bic_const = float(np.sum((yf - yf.mean()) ** 2)) / var + math.log(n_eff)
-    bic_loop = fit.bic
+    fs, noise = fit.f_scale, max(fit.noise, 1e-12)
+    tau = max(fit.tau, 1.0)
+    n_eff = max(qf.size / tau, 2.0)
+
+    def deviance(r: np.ndarray) -> float:
+        return float(np.sum(2.0 * (np.sqrt(1.0 + (r / fs) ** 2) - 1.0))) * fs ** 2 / noise ** 2 / tau
+
+    def robust(design: np.ndarray) -> tuple[float, np.ndarray]:
+        coef0, *_ = np.linalg.lstsq(design, yf, rcond=None)
+        got = least_squares(lambda c: design @ c - yf, coef0, loss="soft_l1", f_scale=fs)
+        return deviance(design @ got.x - yf), got.x
+
+    dev_const, _ = robust(np.ones((qf.size, 1)))
+    dev_line, coef = robust(np.column_stack([np.ones_like(qf), qf]))
+    bic_const = dev_const + math.log(n_eff)
+    bic_line = dev_line + 2 * math.log(n_eff)
+    bic_loop = deviance(fit.loop.predict(qf) - yf) + (8 + sum(map(bool, fit.loop.sides))) * math.log(n_eff)
     if bic_const <= min(bic_line, bic_loop):
         raise IdentificationError(f"{where}: the knob never moves the tip: over {np.ptp(qf):.1f} deg of knob the tip "
                                   f"stays within its noise ({np.std(yf):.3f} deg about its mean); nothing to identify")

@@ -153,6 +153,30 @@ class Piecewise:
         return np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", t, cov, t), 0.0))
 
 
+    def shown_slopes(self) -> tuple[np.ndarray, np.ndarray]:
+        """Slope of the whole fitted curve (broken line and nuisance) over each piece, and its
+        standard error (knots held, tau-inflated).
+
+        Where the nuisance columns vary along ``x`` (a friction term of the knob's speed, which a
+        sine sweep makes a function of position), the split between the broken line and the
+        nuisance is poorly determined, but their sum, the curve the data show, is not: this is
+        the slope a physical reading of the pieces should use. Without nuisance columns it is
+        :attr:`slopes` and :meth:`slope_se`.
+        """
+        x, _, sw, z, u = self.data
+        if not z.shape[1]:
+            return self.slopes, self.slope_se()
+        kn = np.asarray(self.knots)
+        ends = np.concatenate([[x[0]], kn, [x[-1]]])
+        zs = np.column_stack([np.interp(ends, x, z[:, i]) for i in range(z.shape[1])])
+        rows = _design(ends, self.x0, kn, zs)
+        width = np.maximum(np.diff(ends), 1e-12)[:, None]
+        lin = (rows[1:] - rows[:-1]) / width
+        a = _design(x, self.x0, kn, z) * (sw * np.sqrt(u))[:, None]
+        cov = np.linalg.pinv(a.T @ a) * self.scale ** 2 * self.tau
+        return lin @ self.coef, np.sqrt(np.maximum(np.einsum("ij,jk,ik->i", lin, cov, lin), 0.0))
+
+
 def _design(x: np.ndarray, x0: float, knots: np.ndarray, z: np.ndarray) -> np.ndarray:
     cols = [np.ones_like(x), x - x0] + [np.maximum(x - t, 0.0) for t in knots]
     a = np.column_stack(cols)

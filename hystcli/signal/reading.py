@@ -260,8 +260,8 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
     significant rise (the unloading) ends.
     """
     o = orientation(sign, direction)
-    slopes = o * fit.slopes
-    se = fit.slope_se()
+    shown, se = fit.shown_slopes()
+    slopes = o * shown
     k = fit.n_knots
     if k == 0:
         return None, None, None
@@ -571,6 +571,12 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
             no_load[d] = float(np.median(levels))
         est, note = _side_backlash([s for s in stretches if s.direction == -d and s.after_loaded_reversal],
                                    z, settings)
+        if est is not None and est.fixed and not (side in edges and edges[side].fixed):
+            # the held load is measured from a reversal after a take-up the record does not fix:
+            # that reversal may not have loaded the tendon at all
+            est = Estimate(est.value, est.lo, est.hi, est.level, False,
+                           f"the take-up before it is not fixed ({'d_' + side}), so the reversal may not "
+                           "have loaded the tendon")
         if est is not None:
             backlash[side] = est
         else:
@@ -610,7 +616,7 @@ def _side_edge(mine, side, d, sign, z, settings):  # noqa: ANN001, ANN202
                                  + ("(its stretches disagree)" if disagree else ""))
     note = (f"the stretches place the take-up differently ({', '.join(f'{s.edge_at:.2f}' for s in mine)} deg; "
             f"heterogeneity p = {p:.2g}): the interval carries their spread") if disagree else None
-    slope = float(np.median([orientation(sign, d) * s.fit.slopes[s.edge + 1] for s in mine]))
+    slope = float(np.median([orientation(sign, d) * s.fit.shown_slopes()[0][s.edge + 1] for s in mine]))
     level = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted()) for s in mine]))
     return Estimate(v, lo, hi, settings.level, closed, reason), slope, level, note
 
@@ -623,7 +629,7 @@ def _dead_levels(deads, sign) -> tuple[list[float], list[float]]:  # noqa: ANN00
         x_lo = s.fit.knots[s.dead - 1] if s.dead > 0 else x[0]
         x_hi = s.fit.knots[s.dead] if s.dead < s.fit.n_knots else x[-1]
         levels.append(float(np.interp(0.5 * (x_lo + x_hi), x, s.fit.fitted())))
-        slopes.append(float(orientation(sign, s.direction) * s.fit.slopes[s.dead]))
+        slopes.append(float(orientation(sign, s.direction) * s.fit.shown_slopes()[0][s.dead]))
     return levels, slopes
 
 
@@ -690,7 +696,7 @@ def _at_no_load(mine: list[StretchReading], sign: str, z: float, gap: float) -> 
     levels = np.array([_edge_load(s, sign) for s in mine])
     ref = float(levels.max() if sign == "signed" else levels.min())
     noise = max(s.fit.scale / math.sqrt(max(float(np.median(s.fit.data[2] ** 2)), 1e-12)) for s in mine)
-    tilt = max(abs(float(s.fit.slopes[s.dead])) for s in mine) * gap
+    tilt = max(abs(float(s.fit.shown_slopes()[0][s.dead])) for s in mine) * gap
     band = z * math.sqrt(2.0) * noise + tilt
     return [s for s, lv in zip(mine, levels) if abs(lv - ref) <= band]
 
