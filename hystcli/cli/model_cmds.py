@@ -10,8 +10,8 @@ import typer
 from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
                   distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error, warn)
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
-from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxAccelOpt, MaxSpeedOpt, TableOrJson,
-                         TravelLimitOpt, limit_hint, limits)
+from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxAccelOpt, MaxSpeedOpt, StrictSpeedOpt, TableOrJson,
+                         TravelLimitOpt, limit_hint, limits, speed_mode)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
@@ -136,7 +136,7 @@ def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -
 
 
 @command("compensate", epilog="Example: hyst compensate sample_data/reference_periodic.csv --model "
-                              "shifted.json -o commands.csv --allow-fast")
+                              "shifted.json -o commands.csv")
 def compensate_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Desired trajectory CSV with t and r1/r2.",
                                                show_default=False)],
@@ -148,34 +148,37 @@ def compensate_cmd(
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
     max_accel: MaxAccelOpt = None,
     allow_fast: AllowFastOpt = False,
+    strict_speed: StrictSpeedOpt = False,
     fmt: FormatTJOpt = TableOrJson.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Turn desired tip angles r1/r2 into knob commands q1/q2 through the inverse model.
 
     Keeps t, r and the metadata; sets `controller` (comp or comp+shift) and the offsets used.
-    Reports each knob's range, peak speed and peak acceleration, and refuses (writes nothing,
-    exit 1) commands beyond --travel-limit, or beyond --max-speed (--max-accel) unless
-    --allow-fast: where the tip must cross a flat part of the loop (the dead zone, the
-    backlash at a reversal) the inverse model jumps across it within one sample, which a motor
-    cannot follow at the file's timing.
+    Where the tip must cross a flat part of the loop (the dead zone, the backlash at a reversal)
+    the exact inverse jumps across it within one sample, faster than --max-speed: such a step is
+    rate-limited (the knob crosses it at the limit and catches up with the exact inverse after
+    it) and a warning says how long the knob lags and how far the tip is off on the model
+    meanwhile. --allow-fast writes the exact inverse, jumps included; --strict-speed refuses
+    (writes nothing, exit 1). Commands beyond --travel-limit are always refused. Reports each
+    knob's range, peak speed and peak acceleration of what it writes.
     """
     from .. import compensation, io
-    from ..safety import LimitExceeded, check_motion, require_within
+    from ..safety import LimitExceeded
 
+    mode = speed_mode(allow_fast, strict_speed)
     io.check_not_input(output, [trajectory, model_path])
     model = io.load_model(model_path)
     traj = io.read_run(trajectory)
-    result = compensation.compensate(model, traj, ignore_shift=ignore_shift)
     # checked before anything is written: a refused file never exists
-    check = check_motion(result.run, limits(travel_limit, max_speed, max_accel), name=str(output))
     try:
-        require_within(check, allow=("speed", "accel") if allow_fast else (), name=str(output),
-                       action="write")
+        result = compensation.compensate(model, traj, ignore_shift=ignore_shift, speed=mode, name=str(output),
+                                         limits=limits(travel_limit, max_speed, max_accel))
     except LimitExceeded as exc:
         raise type(exc)(f"{exc}{limit_hint(exc)}", exc.check) from None
     for w in result.warnings:
         warn(w)
+    check = result.sent
     for v in check.violations:  # only what --allow-fast let through
         warn(f"{v.message}: written as asked (--allow-fast)")
     io.write_run(output, result.run, inputs=[trajectory, model_path])
@@ -184,7 +187,9 @@ def compensate_cmd(
     if fmt == TableOrJson.json:
         echo_json({"output": str(output), "controller": result.run.meta["controller"],
                    "offsets": {str(k): o for k, o in result.offsets.items()},
-                   "warnings": list(result.warnings), **check.to_dict()})
+                   "warnings": list(result.warnings), "speed": mode,
+                   "rate_limited": {str(k): c.to_dict() for k, c in result.catch_ups.items()},
+                   **check.to_dict()})
     elif not quiet:
         typer.echo(f"{'knob':>4}  {'offset':>7}  {'q min':>7}  {'q max':>7}  {'peak speed':>10}  "
                    f"{'at t':>7}  {'peak accel':>11}  {'at t':>7}")
@@ -196,7 +201,8 @@ def compensate_cmd(
         typer.echo(f"(deg, deg/s, deg/s^2, s; limits: travel +-{lim.travel:g} deg, speed "
                    f"{lim.max_speed:g} deg/s"
                    + (f", acceleration {lim.max_accel:g} deg/s^2" if lim.max_accel is not None else "")
-                   + ("; within them)" if check.ok else "; beyond them, written with --allow-fast)"))
+                   + ("; beyond them, written with --allow-fast)" if not check.ok else
+                      "; within them after rate-limiting)" if result.catch_ups else "; within them)"))
 
 
 @command("predict", epilog="Example: hyst predict run_shift.csv --model shifted.json -o pred.csv")

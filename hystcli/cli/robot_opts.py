@@ -1,7 +1,8 @@
 """Options shared by the commands that talk to a robot or write what it will play.
 
-``play``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate`` declare their
-limits, reply deadline and table/json output from here, so that one option means one thing
+``play``, ``track``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate``
+declare their limits, what to do with a step beyond the speed limit, reply deadline and
+table/json output from here, so that one option means one thing
 (and has one default, with its reason) everywhere. Every number is checked when parsed: a
 non-finite or non-positive value is a usage error (exit 2), never a traceback or a silently
 ignored limit (``nan`` passes a plain ``min=`` bound).
@@ -59,8 +60,14 @@ MaxAccelOpt = Annotated[Optional[float], typer.Option(
     help="Largest knob acceleration, deg/s^2 (default: reported, not limited).")]
 AllowFastOpt = Annotated[bool, typer.Option(
     "--allow-fast",
-    help="Accept steps beyond --max-speed (and --max-accel): `play` sends them at the speed "
-         "limit (the knob arrives late), `compensate` writes them. Travel is never waived.")]
+    help="Keep steps beyond --max-speed (and --max-accel) as they are: `compensate` writes the "
+         "exact inverse, jumps included; `play` and `track` send them at the speed limit (the knob "
+         "arrives late). By default such steps are rate-limited: the knob crosses them at the "
+         "limit and catches up, and a warning says how long it lags. Travel is never waived.")]
+StrictSpeedOpt = Annotated[bool, typer.Option(
+    "--strict-speed",
+    help="Refuse (write or move nothing) when a step is beyond --max-speed (or --max-accel) "
+         "instead of rate-limiting it.")]
 NoReturnOpt = Annotated[bool, typer.Option(
     "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
                         "returning them to where they began.")]
@@ -74,6 +81,14 @@ def limits(travel_limit: float, max_speed: float, max_accel: float | None = None
     return Limits(travel_limit, max_speed, max_accel)
 
 
+def speed_mode(allow_fast: bool, strict_speed: bool) -> str:
+    """The :data:`~hystcli.safety.SPEED_MODES` entry the flags ask for (both: a usage error)."""
+    if allow_fast and strict_speed:
+        raise typer.BadParameter("--allow-fast keeps fast steps, --strict-speed refuses them: give one",
+                                 param_hint="--allow-fast / --strict-speed")
+    return "fast" if allow_fast else "strict" if strict_speed else "limit"
+
+
 def limit_hint(exc: Exception) -> str:
     """What to change when a trajectory is refused by a limit (``LimitExceeded``)."""
     check = getattr(exc, "check", None)
@@ -82,5 +97,6 @@ def limit_hint(exc: Exception) -> str:
     first = check.violations[0].limit if check.violations else ""
     if first == "travel":
         return "; raise --travel-limit only if the robot's knob allows it"
-    return ("; --allow-fast accepts it (the knob then moves at the speed limit and arrives late), "
-            "or raise --max-speed/--max-accel if the robot allows it")
+    return ("; without --strict-speed such steps are rate-limited (the knob crosses them at the limit "
+            "and catches up), --allow-fast keeps them, or raise --max-speed/--max-accel if the robot "
+            "allows it")
