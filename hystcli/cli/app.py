@@ -33,6 +33,9 @@ app = typer.Typer(
     add_completion=True,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
+    epilog="Threads: hyst runs BLAS, OpenMP and numba on 1 thread (its algebra is small; more threads "
+           "only wait for each other on a busy machine). HYST_THREADS=N gives them N; an "
+           "OMP_NUM_THREADS, OPENBLAS_NUM_THREADS or NUMBA_NUM_THREADS you set is kept.",
     context_settings={"help_option_names": ["--help", "-h"]},
 )
 
