@@ -35,6 +35,7 @@ Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) come
 """
 from __future__ import annotations
 
+import codecs
 import gzip
 import json
 import math
@@ -43,13 +44,14 @@ import re
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import BinaryIO, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from .errors import DataError
 from .filters import lowpass
-from .io import KNOWN_COLUMNS, Run
+from . import io
+from .io import KNOWN_COLUMNS, Run, odd_line_breaks
 
 TARGETS = KNOWN_COLUMNS
 """Run columns a mapping may fill (docs/design.md section 6)."""
@@ -694,9 +696,163 @@ def _parse_table(text: str, mapping: ImportMapping, source: str
     return header, linenos, cols
 
 
-def _time(cols: dict[str, np.ndarray], linenos: np.ndarray, mapping: ImportMapping, repair: str,
+def _table_fast(path: Path, mapping: ImportMapping, progress: Callable[[int, int], None] | None = None
+                ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]] | None:
+    """:func:`_parse_table` of a log file by a CSV parser with float64 columns, streamed from the
+    file (gunzipped on the fly): the log is never held whole, as bytes or as text.
+
+    For a log whose rows are plain: after the skipped lines and the comment and blank lines
+    above the first row, no comment or blank line, a one-character (or whitespace) separator,
+    nothing str.splitlines breaks a line at that the parser does not, no NUL byte. None for any
+    other log and for any doubt (a cell that is not a finite number, a short or long row, a
+    corrupt gzip stream): :func:`_parse_table` then reads it and names the problem.
+    """
+    sep, comment = mapping.separator, mapping.comment
+    if sep is not None and (len(sep) != 1 or sep in "\r\n\"+-." or sep.isalnum()):
+        return None
+    if comment is not None and (not comment.isascii() or not comment.strip() or comment[0] in "0123456789+-."):
+        return None
+    try:
+        with _open_log(path) as f:
+            return _stream_table(f, mapping, progress)
+    except (OSError, EOFError, zlib.error):
+        return None   # the line reader's reading says what is wrong with the file
+
+
+def _open_log(path: Path) -> BinaryIO:
+    """The log's bytes as a stream: gunzipped when it is gzip data (by content, not by name)."""
+    f = open(path, "rb")
+    if f.read(2) == b"\x1f\x8b":
+        f.close()
+        return gzip.open(path, "rb")
+    f.seek(0)
+    return f
+
+
+class _Utf8:
+    """Whether a stream of bytes is UTF-8, fed in pieces of whole lines (:func:`read_text`'s
+    choice between UTF-8 and latin-1, without decoding the log)."""
+
+    def __init__(self) -> None:
+        self._decoder = codecs.getincrementaldecoder("utf-8")()
+        self._ok = True
+
+    def feed(self, data: bytes) -> None:
+        if self._ok and not data.isascii():
+            try:
+                self._decoder.decode(data)
+            except UnicodeDecodeError:
+                self._ok = False
+
+    def encoding(self) -> str:
+        if self._ok:
+            try:
+                self._decoder.decode(b"", final=True)
+            except UnicodeDecodeError:
+                self._ok = False
+        return "utf-8" if self._ok else "latin-1"
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def _stream_table(f: BinaryIO, mapping: ImportMapping, progress: Callable[[int, int], None] | None
+                  ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]] | None:
+    comment = mapping.comment.encode() if mapping.comment is not None else None
+    utf8 = _Utf8()
+    head: list[bytes] = []
+    lineno, boms = 0, 0
+    while True:  # the head: skipped lines, then comment and blank lines up to the first row
+        start = f.tell()
+        line = f.readline()
+        if not line or b"\x00" in line or odd_line_breaks(line):
+            return None
+        utf8.feed(line)
+        while lineno == 0 and line.startswith(_BOM):
+            line, boms = line[len(_BOM):], boms + 1
+        lineno += 1
+        body = line.removesuffix(b"\n").removesuffix(b"\r")
+        lead = body.lstrip(b" \t")
+        if lead[:1] == b"\x1f" or lead[:1] >= b"\x80":
+            return None   # whether the line is blank or a comment would depend on its decoding
+        if lineno <= mapping.skip or (comment is not None and lead.startswith(comment)):
+            head.append(body)
+        elif lead.strip():
+            break
+    first = lineno
+    # the rows once over: anything that would make the parser's rows differ from the line
+    # reader's, and the lines, so that the columns are allocated once
+    odd = re.compile(rb"\n[ \t\r]*(?:\n" + (b"|" + re.escape(comment) if comment else b"") + b")")
+    f.seek(start)
+    lines, size, last = 1, start, b""
+    for block in iter(lambda: f.read(1 << 22) + f.readline(), b""):   # whole lines
+        if b"\x00" in block or odd_line_breaks(block) or odd.search(b"\n" + last):
+            return None
+        utf8.feed(block)
+        lines += block.count(b"\n")
+        size += len(block)
+        last = block
+    # blank lines that end the file are no row for either reader
+    if odd.search(b"\n" + last.rstrip(b"\r\n")):
+        return None
+    encoding = utf8.encoding()
+    if boms and encoding != "utf-8":
+        return None   # the line reader keeps those bytes, as latin-1 characters
+    cols = _parse_rows(f, start, lines, size, mapping, encoding, progress)
+    if cols is None:
+        return None
+    n = len(next(iter(cols.values())))
+    # the rows' line numbers (for _time's messages) as a range: no array of the log's length
+    return [line.decode(encoding) for line in head], range(first, first + n), cols
+
+
+def _parse_rows(f: BinaryIO, start: int, lines: int, size: int, mapping: ImportMapping, encoding: str,
+                progress: Callable[[int, int], None] | None) -> dict[str, np.ndarray] | None:
+    """The mapped columns of the rows from ``start``, parsed in blocks into preallocated float64
+    arrays, scaled in place; None at any doubt."""
+    import csv
+
+    import pandas as pd  # here: the command line's start-up must not pay for pandas
+
+    use = sorted({c.column - 1 for c in mapping.columns})
+    values = {j: np.empty(lines) for j in use}
+    # the numbers float() reads (_parse_table's): pandas 3's parser rounds correctly, 2's only so asked
+    exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+    show = progress if progress is not None and size >= io.READ_PROGRESS_BYTES else None
+    n = 0
+    f.seek(start)
+    try:
+        with pd.read_csv(f, sep=r"\s+" if mapping.separator is None else mapping.separator, header=None,
+                         usecols=use, dtype=np.float64, engine="c", quoting=csv.QUOTE_NONE, comment=None,
+                         skip_blank_lines=True, encoding=encoding, chunksize=io.READ_CHUNK_ROWS, **exact) as blocks:
+            for block in blocks:
+                if not isinstance(block.index, pd.RangeIndex) or n + len(block) > lines:
+                    return None
+                for j in use:
+                    values[j][n:n + len(block)] = block[j].to_numpy()
+                n += len(block)
+                if show is not None:
+                    show(min(f.tell(), size), size)
+    except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
+        return None
+    if n == 0 or not all(np.isfinite(v[:n]).all() for v in values.values()):
+        return None
+    uses = [c.column for c in mapping.columns]
+    cols: dict[str, np.ndarray] = {}
+    for c in mapping.columns:
+        v = values[c.column - 1][:n]
+        if uses.count(c.column) > 1:
+            cols[c.target] = v * c.scale + c.offset
+        else:  # in place: the array is this reader's and nothing else reads it
+            v *= c.scale
+            v += c.offset
+            cols[c.target] = v
+    return cols
+
+
+def _time(cols: dict[str, np.ndarray], linenos: Sequence[int], mapping: ImportMapping, repair: str,
           source: str) -> tuple[dict[str, np.ndarray], int]:
-    n = linenos.size
+    n = len(linenos)
     if "t" not in cols:
         cols = dict(cols, t=np.arange(n) / float(mapping.rate))
         return cols, 0
@@ -745,12 +901,28 @@ def resample(run_cols: Mapping[str, np.ndarray], rate: float) -> tuple[dict[str,
     return out, aa
 
 
-def _gain_drift(q: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """Least squares ``y ~ gain*q + b + drift*(t - t0)``: (gain, drift, fitted drift term)."""
-    tt = t - t[0]
-    a = np.column_stack([q, np.ones_like(q), tt])
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    return float(coef[0]), float(coef[2]), coef[2] * tt
+def _gain_drift(q: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+    """Least squares ``y ~ gain*q + b + drift*(t - t0)``: (gain, drift).
+
+    Through the centred 2x2 normal equations, summed a block at a time: no copy of a column of
+    the log's length, where lstsq's n x 3 matrix and its copies held 150 MB more at the peak of
+    a 2M-row import. The
+    normal equations square the problem's condition: they are used while the centred knob angle
+    and time are far from collinear (1 - correlation^2 above 1e-4, where they agree with lstsq to
+    about 1e-12; a sweep's sine against time is near 1), lstsq beyond (a knob that moves almost
+    in step with time)."""
+    means = (q.mean(), t.mean(), y.mean())
+    sums = np.zeros(5)   # qq, qt, tt, qy, ty of the centred columns, a block at a time
+    for i in range(0, q.size, 1 << 20):
+        qc, tc, yc = (x[i:i + (1 << 20)] - m for x, m in zip((q, t, y), means))
+        sums += (qc @ qc, qc @ tc, tc @ tc, qc @ yc, tc @ yc)
+    qq, qt, tt, qy, ty = sums
+    if qq * tt - qt ** 2 <= 1e-4 * qq * tt:
+        a = np.column_stack([q, np.ones_like(q), t - t[0]])
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        return float(coef[0]), float(coef[2])
+    gain, drift = np.linalg.solve([[qq, qt], [qt, tt]], [qy, ty])
+    return float(gain), float(drift)
 
 
 def _render_meta(meta: dict[str, str], found: Mapping[str, str], source: str,
@@ -787,8 +959,13 @@ def _round(x: np.ndarray, decimals: int | None) -> np.ndarray:
 def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
                  source: str = "<log>", readme: Sequence[str] = ()) -> Imported:
     """Convert the text of one raw log (see :func:`convert`)."""
-    header, linenos, cols = _parse_table(text, mapping, source)
-    rows_read = linenos.size
+    return _convert(_parse_table(text, mapping, source), mapping, options, source, readme)
+
+
+def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapping: ImportMapping,
+             options: ImportOptions, source: str, readme: Sequence[str]) -> Imported:
+    header, linenos, cols = table
+    rows_read = len(linenos)
     cols, dropped = _time(cols, linenos, mapping, options.time_repair, source)
     warnings: list[str] = []
     if dropped:
@@ -802,8 +979,10 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     med = float(np.median(steps))
     rate_in = 1.0 / med
     irregular = bool(steps.max() > _IRREGULAR * med or steps.min() < med / _IRREGULAR)
+    step_range = (float(steps.min()), float(steps.max()))
+    del steps  # a big log's columns are the memory: no copy of one kept longer than needed
     if irregular and options.resample is None:
-        warnings.append(f"irregular sampling (steps {steps.min():.6g} .. {steps.max():.6g} s around "
+        warnings.append(f"irregular sampling (steps {step_range[0]:.6g} .. {step_range[1]:.6g} s around "
                         f"{med:.6g} s): --resample HZ puts it on a uniform grid")
 
     flip = mapping.flip_output if options.flip_output is None else options.flip_output
@@ -830,8 +1009,9 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
         q, y = cols.get(f"q{k}"), cols.get(f"y{k}")
         drift = None
         if q is not None and y is not None and np.ptp(q) > 0:
-            _, drift, trend = _gain_drift(q, y, cols["t"])
+            _, drift = _gain_drift(q, y, cols["t"])
             if options.detrend:
+                trend = drift * (cols["t"] - cols["t"][0])
                 cols[f"y{k}"] = y - trend
                 if f"r{k}" in cols:
                     cols[f"r{k}"] = cols[f"r{k}"] - trend
@@ -892,6 +1072,8 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
                         f"({1.0 / (options.resample or rate_in):.3g} s)")
     current = (unit, to_ma) if any(name[0] == "c" for name in cols) else None
     meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased, current)
+    for values in ordered.values():
+        values.setflags(write=False)  # the conversion's own arrays: the run shares them, no copy
     run = Run(ordered, meta, source)
 
     tt = run["t"]
@@ -925,7 +1107,7 @@ def _import_note(mapping: ImportMapping, flip: bool, options: ImportOptions, kno
 
 
 def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
-            source: str | None = None) -> Imported:
+            source: str | None = None, progress: Callable[[int, int], None] | None = None) -> Imported:
     """Convert one raw log file (plain text or gzip) into a run.
 
     Parameters
@@ -938,6 +1120,9 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
         Conditioning: zero, flip, resample, detrend, time repair, rounding, extra metadata.
     source : str, optional
         Name used in messages and in ``source_file`` (default: the path).
+    progress : callable, optional
+        ``progress(bytes_parsed, bytes_total)`` after each block of rows of a log of at least
+        :data:`hystcli.io.READ_PROGRESS_BYTES` read by the CSV parser.
 
     Returns
     -------
@@ -954,9 +1139,19 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     """
     p = Path(path)
     name = str(path) if source is None else source
-    text = read_text(p)
     readme = _readme_lines(p) if mapping.meta_from_readme else []
-    return convert_text(text, mapping, options, source=name, readme=readme)
+    return _convert(_read_table(p, mapping, name, progress), mapping, options, name, readme)
+
+
+def _read_table(path: Path, mapping: ImportMapping, source: str, progress: Callable[[int, int], None] | None
+                ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]]:
+    """The mapped columns of a log file: streamed through the CSV parser where it can
+    (:func:`_table_fast`), else read whole and line by line (:func:`_parse_table`)."""
+    if path.is_file():
+        table = _table_fast(path, mapping, progress)
+        if table is not None:
+            return table
+    return _parse_table(read_text(path), mapping, source)
 
 
 def output_name(path: str | os.PathLike) -> str:

@@ -161,3 +161,16 @@ def test_a_bad_thread_count_is_a_usage_error_and_help_says_how_to_set_it():
     assert res.returncode == 2 and res.stderr == "Error: HYST_THREADS must be a positive whole number, got 'many'\n"
     res = _python("from hystcli.__main__ import main; import sys; sys.argv = ['hyst', '--help']; main()")
     assert "HYST_THREADS" in res.stdout and "OPENBLAS_NUM_THREADS" in res.stdout
+
+
+def test_a_bad_input_file_is_refused_before_anything_heavy_loads(tmp_path):
+    """The error line of a missing or malformed run comes in the command line's own start-up
+    time: scipy, numba, pandas and the fit load only for a file that can be read."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,knob,tip\n0,1,2\n")
+    for path in (tmp_path / "missing.csv", bad):
+        assert _loaded_after(["identify", str(path), "-o", str(tmp_path / "m.json")]) == []
+    good = tmp_path / "good.csv"
+    good.write_text("t,q1,c1\n0,0,0\n0.1,1,1\n")
+    # a readable file goes on to the fit (which refuses two samples; the libraries came first)
+    assert "hystcli.identify" in _loaded_after(["identify", str(good), "-o", str(tmp_path / "m.json")])

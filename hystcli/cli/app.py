@@ -310,6 +310,18 @@ def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]
 
 
 @contextlib.contextmanager
+def reading(path: Path, quiet: bool = False) -> Iterator[Optional[Callable[[int, int], None]]]:
+    """The ``progress`` of a big file's reading (:func:`hystcli.io.read_run`,
+    :func:`hystcli.importer.convert`): a rich bar on stderr, in MiB, only when stderr is a
+    terminal (a log gets no lines of it); None otherwise."""
+    if quiet or not stderr_is_tty():
+        yield None
+        return
+    with _rich_progress() as update:
+        yield lambda done, total: update(f"reading {Path(path).name}", done >> 20, total >> 20)
+
+
+@contextlib.contextmanager
 def _rich_progress() -> Iterator[ProgressFn]:
     from rich.console import Console
     from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn

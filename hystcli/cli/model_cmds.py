@@ -8,7 +8,7 @@ from typing import Annotated, Optional
 import typer
 
 from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
-                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, usage_error, warn)
+                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, reading, usage_error, warn)
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxAccelOpt, MaxSpeedOpt, StrictSpeedOpt, TableOrJson,
                          TravelLimitOpt, limit_hint, limits, speed_mode)
@@ -56,7 +56,6 @@ def identify_cmd(
     from dataclasses import replace
 
     from .. import io
-    from ..identify import identify, plot_identification
     from ..model import Geometry
     from ..settings import Settings
 
@@ -76,7 +75,12 @@ def identify_cmd(
         io.check_not_input(output, [sweep])
     settings = Settings(level=level, current_sign=current_sign.value)
     with about(sweep):
-        run = io.read_run(sweep, require=("t",))
+        with reading(sweep, quiet) as progress:
+            run = io.read_run(sweep, require=("t",), progress=progress)
+        # the fit's libraries (scipy, numba) load only once the file is known to be good: a bad
+        # file's error line comes in the time the command line itself takes to start
+        from ..identify import identify, plot_identification
+
         result = identify(run, omega=omega, use_tip=not current_only, settings=settings)
     for fit in result.fits.values():
         for w in fit.warnings:
