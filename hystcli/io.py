@@ -339,6 +339,8 @@ def _read_blocks(f: BinaryIO, source: str, require: Iterable[str], size: int,
             return None          # no header: parse_run says so
         if not head:
             raw = raw.removeprefix(b"\xef\xbb\xbf")
+            if raw.startswith(b"\xef\xbb\xbf"):
+                return None      # a second mark: parse_run takes it off too
         if odd_line_breaks(raw):
             return None
         line = raw.decode("utf-8").removesuffix("\n").removesuffix("\r")
@@ -463,15 +465,21 @@ def write_run(path: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathL
     inputs : iterable of path-like
         Input files of the command: writing over one of them is refused.
     """
+    atomic_write(path, _run_writer(run), inputs=inputs)
+
+
+def _run_writer(run: Run) -> Callable[[BinaryIO], None]:
+    """A writer of ``run``'s CSV text to a binary file, piece by piece; the run is checked when
+    this is called, before any file is made."""
     pieces = _run_text(run)
-    first = next(pieces)  # the checks run before any file is made
-    atomic_write(path, lambda f: _write_pieces(f, first, pieces), inputs=inputs)
+    first = next(pieces)
 
+    def write(f: BinaryIO) -> None:
+        f.write(first.encode("utf-8"))
+        for piece in pieces:
+            f.write(piece.encode("utf-8"))
 
-def _write_pieces(f: BinaryIO, first: str, pieces: Iterable[str]) -> None:
-    f.write(first.encode("utf-8"))
-    for piece in pieces:
-        f.write(piece.encode("utf-8"))
+    return write
 
 
 # --------------------------------------------------------------------------------------------
@@ -579,14 +587,7 @@ class PendingOutputs:
     def write_bytes(self, target: str | os.PathLike, data: bytes,
                     inputs: Iterable[str | os.PathLike] = ()) -> None:
         """Stage ``data`` for ``target``."""
-        tmp = self.path(target, inputs)
-        try:
-            with open(tmp, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-        except OSError as exc:
-            raise _cannot_write(target, exc) from None
+        self._write(target, lambda f: f.write(data), inputs)
 
     def write_text(self, target: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = ()) -> None:
         """Stage ``text`` (UTF-8) for ``target``."""
@@ -594,12 +595,14 @@ class PendingOutputs:
 
     def write_run(self, target: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathLike] = ()) -> None:
         """Stage ``run`` as a run CSV for ``target``, piece by piece (:func:`write_run`)."""
-        pieces = _run_text(run)
-        first = next(pieces)
+        self._write(target, _run_writer(run), inputs)
+
+    def _write(self, target: str | os.PathLike, writer: Callable[[BinaryIO], object],
+               inputs: Iterable[str | os.PathLike]) -> None:
         tmp = self.path(target, inputs)
         try:
             with open(tmp, "wb") as f:
-                _write_pieces(f, first, pieces)
+                writer(f)
                 f.flush()
                 os.fsync(f.fileno())
         except OSError as exc:

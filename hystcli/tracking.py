@@ -8,14 +8,14 @@ start). What the robot answers (motor current, the tracker's tip angle) is logge
 reference and the commands: the log is a run CSV (docs/design.md section 6) that ``hyst evaluate``
 reads as it is.
 
-Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and
-checked against the limits before the first ``MOVE`` (nothing moves when a command is beyond
-the travel limit, or, with ``speed="strict"``, a step beyond the speed limit); a reference on
-stdin is checked sample by sample, before each ``MOVE``. With ``speed="limit"`` the compensator
-rate-limits its commands as it goes (:class:`hystcli.stream.Compensator`'s ``limits``): the knob
-crosses the inverse's jumps at the speed limit and catches up after them. On any fault (a link error, a garbled or late
-reply, a bad reference line, a limit, Ctrl-C) every motor is stopped, the knobs go back to where
-they began, and the error says where they are; the caller writes nothing.
+Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and checked
+against the limits before the first ``MOVE`` (nothing moves when a command is beyond the travel
+limit, or, with ``speed="strict"``, a step beyond the speed limit); a reference on stdin is checked
+sample by sample, before each ``MOVE``. With ``speed="limit"`` the compensator rate-limits its
+commands as it goes (:class:`hystcli.stream.Compensator`'s ``limits``): the knob crosses the
+inverse's jumps at the speed limit and catches up after them. On any fault (a link error, a garbled
+or late reply, a bad reference line, a limit, Ctrl-C) every motor is stopped, the knobs go back to
+where they began, and the error says where they are; the caller writes nothing.
 
 The core never prints; ``hystcli/cli/track_cmds.py`` renders.
 """

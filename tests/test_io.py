@@ -362,7 +362,8 @@ def _read_both(tmp_path, data: bytes):
     b"t,q1\n0,1,5\n", b"t,q1,y1\n0,1\n", b"t,q1\n0,1,\n0.1,2,\n",   # a surplus first field: no index
     b"t,q1\n0,1\n0.1,2,3\n", b't,q1\n0,"1"\n', b"t,q1\n0,1\n\n0.1,2\n", b"t,q1\n0,1\r\n0.1,2\r\n",
     b"t,q1\n0,1\r0.1,2\n", b"t,q1\n0,1\x0c\n0.1,2\n", b"t,q1\n0,1\n0.1,1e308\n", b"t,q1\n0,1\n  \n0.1,2\n",
-    b"\xef\xbb\xbf# catheter: x\n\nt,q1\n0,1\n", b"t,q1\n", b"# a: b\n", b"t,q1\n0,\xe4\n", b"t,q1\n0,1\n0.1,inf\n",
+    b"\xef\xbb\xbf# catheter: x\n\nt,q1\n0,1\n", b"\xef\xbb\xbf\xef\xbb\xbft,q1\n0,1\n", b"t,q1\n", b"# a: b\n",
+    b"t,q1\n0,\xe4\n", b"t,q1\n0,1\n0.1,inf\n",
     b"t,q1\n# note\n0,1\n", b"t;q1\n0;1\n", b"t,q1\n 0 , 1 \n0.1,2\n", b"t,q1\n0,1\n0.1,2",
 ])
 def test_the_block_reader_reads_or_refuses_as_parse_run(tmp_path, data):
