@@ -15,7 +15,6 @@ from typing import Annotated, Any, Iterator, Optional
 import typer
 
 from .. import device
-from .. import shift as shift_mod
 from ..errors import DataError
 from ..io import all_or_none, check_not_input, dumps_model, file_sha256, load_model, read_run
 from ..model import Model
@@ -40,7 +39,9 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
                                 f"(no column {' or '.join(f'q{k}' for k in model.knobs)})")
         for k in knobs:
             model.knob(k)
-        yield {k: shift_mod.ReplayProbe(run, k) for k in knobs}, run
+        from ..shift import ReplayProbe
+
+        yield {k: ReplayProbe(run, k) for k in knobs}, run
         return
     knobs = list(model.knobs) if knobs is None else knobs
     for k in knobs:
@@ -54,7 +55,7 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
                                      dwell=dwell, mean=mean) for k in knobs}, None
 
 
-def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
+def _table(results: dict[int, Any], output: Path) -> str:
     head = (f"{'knob':>4}  {'offset':>8}  {'interval':>17}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  "
             f"{'travel':>7}  {'steps':>5}  notes")
     lines = [head, "-" * len(head)]
@@ -165,11 +166,14 @@ def detect_shift_cmd(
 
     model = load_model(model_path)
     knobs = None if knob is None else [knob]
+    # here, not at the top: the search loads numba, which `hyst --help` and a bad input's error
+    # line must not wait for
+    from .. import shift as shift_mod
     from ..settings import Settings
 
     options = dict(eps_upper=eps_upper, settings=Settings(false_alarm=false_alarm), step=step, max_steps=max_steps,
                    max_travel=max_travel)
-    results: dict[int, shift_mod.ShiftResult] = {}
+    results: dict[int, Any] = {}
     with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window,
                  timeout) as (probes, run):
         for k, probe in probes.items():
