@@ -815,32 +815,18 @@ def _parse_rows(f: BinaryIO, start: int, lines: int, size: int, mapping: ImportM
     import pandas as pd  # here: the command line's start-up must not pay for pandas
 
     use = sorted({c.column - 1 for c in mapping.columns})
-    values = {j: np.empty(lines) for j in use}
     # the numbers float() reads (_parse_table's): pandas 3's parser rounds correctly, 2's only so asked
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
-    show = progress if progress is not None and size >= io.READ_PROGRESS_BYTES else None
-    n = 0
     f.seek(start)
-    try:
-        with pd.read_csv(f, sep=r"\s+" if mapping.separator is None else mapping.separator, header=None,
-                         usecols=use, dtype=np.float64, engine="c", quoting=csv.QUOTE_NONE, comment=None,
-                         skip_blank_lines=True, encoding=encoding, chunksize=io.READ_CHUNK_ROWS, **exact) as blocks:
-            for block in blocks:
-                if not isinstance(block.index, pd.RangeIndex) or n + len(block) > lines:
-                    return None
-                for j in use:
-                    values[j][n:n + len(block)] = block[j].to_numpy()
-                n += len(block)
-                if show is not None:
-                    show(min(f.tell(), size), size)
-    except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
-        return None
-    if n == 0 or not all(np.isfinite(v[:n]).all() for v in values.values()):
+    values = io.read_csv_blocks(f, use, lines, size, progress, usecols=use, encoding=encoding,
+                                sep=r"\s+" if mapping.separator is None else mapping.separator,
+                                quoting=csv.QUOTE_NONE, **exact)
+    if values is None or not all(np.isfinite(v).all() for v in values.values()):
         return None
     uses = [c.column for c in mapping.columns]
     cols: dict[str, np.ndarray] = {}
     for c in mapping.columns:
-        v = values[c.column - 1][:n]
+        v = values[c.column - 1]
         if uses.count(c.column) > 1:
             cols[c.target] = v * c.scale + c.offset
         else:  # in place: the array is this reader's and nothing else reads it

@@ -352,37 +352,51 @@ def _read_blocks(f: BinaryIO, source: str, require: Iterable[str], size: int,
     rows = _count_lines(f, start)
     if rows is None:
         return None
+    f.seek(start)
+    cols = read_csv_blocks(f, header, rows, size, progress, names=header, encoding="utf-8")
+    if cols is None:
+        return None
+    for name, arr in cols.items():
+        if _bad_value(name, arr) is not None:
+            return None
+        arr.setflags(write=False)  # shared by the Run as it is (no copy)
+    t = cols["t"]
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        return None
+    return Run(cols, meta, source)
+
+
+def read_csv_blocks(f: BinaryIO, keys: list, lines: int, size: int,
+                    progress: Callable[[int, int], None] | None, **options: object) -> dict | None:
+    """The columns ``keys`` of the rows pandas' C parser reads from ``f`` (from where it is), a
+    block of :data:`READ_CHUNK_ROWS` rows at a time, into float64 arrays allocated once for
+    ``lines`` rows: the rows are never held as text, nor twice as numbers.
+
+    ``options`` go to :func:`pandas.read_csv` (``names``, ``usecols``, ``sep`` ...).
+    ``progress(position, size)`` follows each block, for a file of at least
+    :data:`READ_PROGRESS_BYTES`. None at any doubt, for the caller's own reader to judge: a parse
+    error, no row, more rows than ``lines``, or a first row with more fields than asked for
+    (pandas would take the surplus as the index and shift the rows).
+    """
     import pandas as pd  # here, not at the top: pandas alone costs `hyst --help` half a second
 
-    cols = {name: np.empty(rows) for name in header}
+    cols = {k: np.empty(lines) for k in keys}
     n = 0
     show = progress if progress is not None and size >= READ_PROGRESS_BYTES else None
     try:
-        f.seek(start)
-        with pd.read_csv(f, header=None, names=header, dtype=np.float64, skip_blank_lines=True, comment=None,
-                         engine="c", encoding="utf-8", chunksize=READ_CHUNK_ROWS) as blocks:
+        with pd.read_csv(f, header=None, dtype=np.float64, engine="c", comment=None, skip_blank_lines=True,
+                         chunksize=READ_CHUNK_ROWS, **options) as blocks:
             for block in blocks:
-                # a first row with more fields than the header makes pandas take the surplus as the
-                # index: the rows would be shifted
-                if not isinstance(block.index, pd.RangeIndex) or n + len(block) > rows:
+                if not isinstance(block.index, pd.RangeIndex) or n + len(block) > lines:
                     return None
-                for name in header:
-                    cols[name][n:n + len(block)] = block[name].to_numpy()
+                for k in keys:
+                    cols[k][n:n + len(block)] = block[k].to_numpy()
                 n += len(block)
                 if show is not None:
                     show(min(f.tell(), size), size)
     except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
         return None
-    if n == 0:
-        return None
-    for name, arr in cols.items():
-        arr = cols[name] = arr[:n]
-        if _bad_value(name, arr) is not None:
-            return None
-        arr.setflags(write=False)  # shared by the Run as it is (no copy)
-    if n > 1 and not np.all(np.diff(cols["t"]) > 0):
-        return None
-    return Run(cols, meta, source)
+    return {k: v[:n] for k, v in cols.items()} if n else None
 
 
 def _count_lines(f: BinaryIO, start: int) -> int | None:
