@@ -29,6 +29,7 @@ from types import MappingProxyType
 from typing import Any, Mapping
 
 from .errors import DeviceError, LinkError, SafetyStop
+from .shift import ProbeSample
 
 PROTOCOL_VERSION = 1
 FEATURES = ("dwell", "mean")
@@ -806,8 +807,6 @@ class DeviceProbe:
     def read(self) -> Any:
         """The knob at rest where it is: a sample ``(q, current, tip)`` without moving (the
         state the device reported when the probe opened, before any step)."""
-        from .shift import ProbeSample  # here: the command line imports this module, and the search loads numba
-
         s = self.last
         return ProbeSample(s.angle, s.current, s.tip)
 
@@ -831,8 +830,6 @@ class DeviceProbe:
         self._q = s.angle
         self.last = s
         self._check(s)
-        from .shift import ProbeSample
-
         if s.averaged:
             return ProbeSample(s.mean_angle, s.mean_current, s.tip)
         return ProbeSample(s.angle, s.current, s.tip)

@@ -1,12 +1,16 @@
 """Foreign logs to run CSVs: column mappings, presets, and the conditioning real data needs.
 
-This module owns ``hyst import`` (docs/import.md holds the user's view). A *mapping*
-(:class:`ImportMapping`) says how to read one logger's text files: separator, comment prefix,
-header lines to skip, which 1-based column becomes which run column (``t``, ``q1`` ... ``r2`` of
-docs/design.md section 6) with ``value = raw * scale + offset``, and where the metadata comes from
-(fixed values, regular expressions over the header lines, and over a ``README`` beside the file).
-A *preset* is a named, built-in mapping (:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data
-set, ``sample_data/real/PROVENANCE.md``).
+This module owns ``hyst import`` and the ``--columns`` option of the other commands
+(docs/import.md holds the user's view). A *mapping* (:class:`ImportMapping`) says how to read one
+logger's text files: separator, comment prefix, header lines to skip, which column (by its name
+in the header row, or its number from 1) becomes which run column (``t``, ``q1`` ... ``r2`` of
+docs/design.md section 6) in which unit or with ``value = raw * scale + offset``, and where the
+metadata comes from (fixed values, regular expressions over the header lines, and over a
+``README`` beside the file). The separator, the comment lines and the header row may be left to
+the file itself (``auto``: :func:`split_table`). A *preset* is a named, built-in mapping
+(:data:`PRESETS`; ``mrdlab`` for the MRDLab EndoWrist data set,
+``sample_data/real/PROVENANCE.md``). ``--columns`` (:func:`columns_mapping`, :func:`read_mapped`)
+reads a user's own CSV as a run without writing one.
 
 What real hardware logs need, learnt from that data set and handled here, not by hand-editing:
 
@@ -36,6 +40,8 @@ Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) come
 from __future__ import annotations
 
 import codecs
+import csv
+import difflib
 import gzip
 import json
 import math
@@ -51,7 +57,8 @@ import numpy as np
 from .errors import DataError
 from .filters import lowpass
 from . import io
-from .io import KNOWN_COLUMNS, Run, odd_line_breaks
+from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run, odd_line_breaks
+from .io import _parse_meta_line as _meta_line
 
 TARGETS = KNOWN_COLUMNS
 """Run columns a mapping may fill (docs/design.md section 6)."""
@@ -64,49 +71,112 @@ MAPPING_VERSION = 1
 ANTI_ALIAS_FRACTION = 0.4
 """Anti-alias cut-off of :func:`resample` as a fraction of the new sample rate."""
 
-_IRREGULAR = 1.5  # a step longer than this many median steps makes the sampling "irregular"
+IRREGULAR = 1.5
+"""A time step longer than this many median steps (or shorter than the median over it) makes the
+sampling irregular."""
+
+AUTO = "auto"
+"""A mapping's ``separator`` or ``comment`` found from the file itself."""
+
+COMMENT_PREFIXES = ("#", "%")
+"""Comment prefixes an ``auto`` comment setting recognises."""
 _KEY_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_.-]*$")
 
 
 # --------------------------------------------------------------------------------------------
 # mappings
 # --------------------------------------------------------------------------------------------
+TIME_UNITS = {"s": 1.0, "ms": 1e-3, "us": 1e-6, "min": 60.0}
+"""Time units a mapping may name, with the factor to s (the unit of a run's ``t``)."""
+
+ANGLE_UNITS = {"deg": 1.0, "rad": 180.0 / math.pi, "rev": 360.0}
+"""Angle units a mapping may name, with the factor to deg (the unit of ``q``, ``y`` and ``r``)."""
+
+CURRENT_UNIT = "mA"
+"""The unit of a run's current columns ``c<k>`` (docs/design.md section 6)."""
+
+CURRENT_UNITS = {"A": 1000.0, "mA": 1.0, "uA": 1e-3}
+"""Current units a log may state (metadata ``current_unit``, or a mapping's unit), with the factor to
+mA; a log that states none is taken to be in mA."""
+
+_UNITS = {"t": ("time", TIME_UNITS), "q": ("angle", ANGLE_UNITS), "y": ("angle", ANGLE_UNITS),
+          "r": ("angle", ANGLE_UNITS), "c": ("current", CURRENT_UNITS)}
+
+
+def unit_names() -> str:
+    """The units of every kind of run column, for messages: ``t: s, ms, ...; q/y/r: deg, ...``."""
+    return (f"t: {', '.join(TIME_UNITS)}; q/y/r: {', '.join(ANGLE_UNITS)}; "
+            f"c: {', '.join(CURRENT_UNITS)}")
+
+
+def _unit(target: str, name: str) -> tuple[str, float] | None:
+    """The canonical name and the factor of unit ``name`` for ``target``'s kind (case aside: ``a``
+    is ``A``), or None when it is no unit of that kind."""
+    kind, table = _UNITS[target[0]]
+    return next(((u, f) for u, f in table.items() if u.lower() == name.strip().lower()), None)
+
+
 @dataclass(frozen=True)
 class ColumnMap:
-    """One run column from one raw column: ``value = raw * scale + offset``.
+    """One run column from one raw column: ``value = raw * scale + offset``, or with a unit
+    ``value = raw * (the unit's factor) + offset``.
 
     Attributes
     ----------
     target : str
         Run column name (one of :data:`TARGETS`).
-    column : int
-        1-based column number in the raw file.
+    column : int or str
+        1-based column number in the raw file, or the column's name in its header row.
     scale, offset : float
-        Linear conversion to the run's units (deg, s, the current's unit).
+        Linear conversion to the run's units (deg, s, mA).
+    unit : str or None
+        The raw column's unit (:func:`unit_names`), converted to the run's unit: ``ms`` to s,
+        ``rad`` to deg, ``A`` to mA. None: the column is in the run's unit, or (a current) in the
+        unit the log's ``current_unit`` metadata states.
     """
 
     target: str
-    column: int
+    column: int | str
     scale: float = 1.0
     offset: float = 0.0
+    unit: str | None = None
 
     def __post_init__(self) -> None:
         if self.target not in TARGETS:
             raise DataError(f"mapping: unknown target column {self.target!r} "
                             f"(targets: {', '.join(TARGETS)})")
-        if isinstance(self.column, bool) or not isinstance(self.column, int) or self.column < 1:
-            raise DataError(f"mapping: {self.target}: column must be a number >= 1 (columns count from 1), "
-                            f"got {self.column!r}")
+        if isinstance(self.column, str):
+            if not self.column.strip():
+                raise DataError(f"mapping: {self.target}: empty column name")
+            object.__setattr__(self, "column", self.column.strip())
+        elif isinstance(self.column, bool) or not isinstance(self.column, int) or self.column < 1:
+            raise DataError(f"mapping: {self.target}: column must be a number >= 1 (columns count from 1) "
+                            f"or a name, got {self.column!r}")
         for name in ("scale", "offset"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
                 raise DataError(f"mapping: {self.target}: {name} must be a finite number, got {v!r}")
         if self.scale == 0:
             raise DataError(f"mapping: {self.target}: scale 0 would erase the column")
+        if self.unit is not None:
+            if self.scale != 1:
+                raise DataError(f"mapping: {self.target}: give a unit or a scale, not both")
+            unit = _unit(self.target, str(self.unit))
+            if unit is None:
+                kind, table = _UNITS[self.target[0]]
+                raise DataError(f"mapping: {self.target}: {self.unit!r} is not a {kind} unit "
+                                f"({', '.join(table)})")
+            object.__setattr__(self, "unit", unit[0])
+
+    @property
+    def factor(self) -> float:
+        """What a raw value is multiplied by: the scale times the unit's factor."""
+        return self.scale * (1.0 if self.unit is None else _unit(self.target, self.unit)[1])
 
     def spec(self) -> str:
-        """The ``target=column:scale[:offset]`` form of :func:`parse_map_spec`."""
-        s = f"{self.target}={self.column}:{self.scale!r}"
+        """The ``target=column:scale[:offset]`` (or ``target=column:unit[:offset]``) form of
+        :func:`parse_map_spec`."""
+        s = f"{self.target}={self.column}:{self.unit if self.unit is not None else repr(self.scale)}"
         return s + (f":{self.offset!r}" if self.offset else "")
 
 
@@ -159,9 +229,11 @@ class ImportMapping:
     columns : tuple of ColumnMap
         At most one per target; ``t`` may be absent when ``rate`` is given.
     separator : str or None
-        Field separator; None splits on any whitespace.
+        Field separator; None splits on any whitespace; ``"auto"`` (:data:`AUTO`) finds comma,
+        tab, semicolon or whitespace from the data (:func:`sniff_separator`).
     comment : str or None
-        Lines starting with this prefix are header lines (searched by ``meta_from_header``).
+        Lines starting with this prefix are header lines (searched by ``meta_from_header``);
+        ``"auto"``: lines starting with any of :data:`COMMENT_PREFIXES`.
     skip : int
         Lines at the top of the file skipped before anything else (also searched for metadata).
     rate : float or None
@@ -176,6 +248,11 @@ class ImportMapping:
         Negate the output (``y``) and reference (``r``) columns.
     name : str
         Preset name or where the mapping came from, for the report.
+    as_run : bool
+        Read the file as a run CSV in other clothes (``--columns``): its ``# key: value`` comment
+        lines are metadata, and a header column already named like a run column (``t``, ``q1``
+        ...) that the mapping neither fills nor reads is kept as it is. Whether there is a time
+        column is then known only once the header is read.
     """
 
     columns: tuple[ColumnMap, ...]
@@ -188,6 +265,7 @@ class ImportMapping:
     meta_from_readme: tuple[MetaPattern, ...] = ()
     flip_output: bool = False
     name: str = "custom"
+    as_run: bool = False
 
     def __post_init__(self) -> None:
         seen: set[str] = set()
@@ -197,7 +275,7 @@ class ImportMapping:
             seen.add(c.target)
         if not self.columns:
             raise DataError("mapping: no column is mapped (give --preset, --map or --mapping)")
-        if "t" not in seen and self.rate is None:
+        if "t" not in seen and self.rate is None and not self.as_run:
             raise DataError("mapping: no time column: map t=COLUMN or give the sample rate (--rate HZ)")
         if self.rate is not None and not (math.isfinite(self.rate) and self.rate > 0):
             raise DataError(f"mapping: rate must be a positive number of Hz, got {self.rate!r}")
@@ -240,31 +318,47 @@ def parse_number(text: str, what: str) -> float:
     return v
 
 
-def parse_map_spec(spec: str) -> tuple[ColumnMap, ...]:
-    """Parse ``t=1:0.001,q1=2:360/8192,y1=5:0.09:-12.5,c1=4``.
+MAP_SYNTAX = "target=column[:scale|unit[:offset]]"
+"""The form of one ``--map`` / ``--columns`` item (:func:`parse_map_spec`)."""
 
-    Each item is ``target=column[:scale[:offset]]``; ``column`` counts from 1, ``scale``
-    defaults to 1 and ``offset`` to 0 (``value = raw * scale + offset``); scale and offset may
-    be fractions.
+
+def parse_map_spec(spec: str) -> tuple[ColumnMap, ...]:
+    """Parse ``t=time_ms:ms,q1=knob:rad,y1=tip_deg,c1=I:A`` or ``t=1:0.001,q1=2:360/8192,c1=4``.
+
+    Each item is ``target=column[:scale|unit[:offset]]``. ``column`` is the column's name in the
+    file's header row, or its number counting from 1. The second part is a unit (``ms`` ->
+    s, ``rad`` -> deg, ``A`` -> mA; :func:`unit_names`) or a scale (default 1; a fraction such as
+    ``360/8192`` is fine), and the third an offset in the run's unit (default 0): ``value = raw
+    * scale + offset``. A name cannot contain ``,``, ``=`` or ``:``.
     """
     out = []
     for item in (s.strip() for s in str(spec).split(",")):
         if not item:
             continue
         if "=" not in item:
-            raise DataError(f"mapping {item!r}: expected target=column[:scale[:offset]]")
+            raise DataError(f"mapping {item!r}: expected {MAP_SYNTAX}")
         target, _, rhs = item.partition("=")
         target = target.strip()
         parts = [p.strip() for p in rhs.split(":")]
         if len(parts) > 3 or not parts[0]:
-            raise DataError(f"mapping {item!r}: expected target=column[:scale[:offset]]")
-        try:
-            col = int(parts[0])
-        except ValueError:
-            raise DataError(f"mapping {item!r}: column {parts[0]!r} is not a whole number") from None
-        scale = parse_number(parts[1], f"mapping {item!r} scale") if len(parts) > 1 and parts[1] else 1.0
+            raise DataError(f"mapping {item!r}: expected {MAP_SYNTAX}")
+        col: int | str = int(parts[0]) if parts[0].lstrip("+-").isdigit() else parts[0]
+        scale, unit = 1.0, None
+        if len(parts) > 1 and parts[1]:
+            if target in TARGETS and _unit(target, parts[1]) is not None:
+                unit = parts[1]
+            else:
+                try:
+                    scale = parse_number(parts[1], f"mapping {item!r} scale")
+                except DataError:
+                    if not parts[1].isalpha() or parts[1].lower() in ("inf", "infinity", "nan"):
+                        raise
+                    kind = _UNITS[target[0]][0] if target in TARGETS else None
+                    what = "a unit" if kind is None else f"{'an' if kind == 'angle' else 'a'} {kind} unit"
+                    raise DataError(f"mapping {item!r}: {parts[1]!r} is not a number or {what} "
+                                    f"({unit_names()})") from None
         offset = parse_number(parts[2], f"mapping {item!r} offset") if len(parts) > 2 and parts[2] else 0.0
-        out.append(ColumnMap(target, col, scale, offset))
+        out.append(ColumnMap(target, col, scale, offset, unit))
     if not out:
         raise DataError(f"mapping {spec!r}: no column given")
     return tuple(out)
@@ -288,12 +382,13 @@ def parse_meta_option(text: str) -> tuple[str, str]:
 
 
 def parse_separator(value: object) -> str | None:
-    """A separator option: a string, or 'tab', 'comma', 'semicolon', 'whitespace' (None: any whitespace)."""
+    """A separator option: a string, or 'tab', 'comma', 'semicolon', 'whitespace' (None: any
+    whitespace), or 'auto' (found from the data)."""
     if value is None:
         return None
     s = str(value)
     named = {"whitespace": None, "space": None, " ": None, "tab": "\t", "\\t": "\t",
-             "comma": ",", "semicolon": ";"}
+             "comma": ",", "semicolon": ";", AUTO: AUTO}
     return named.get(s.lower() if s.strip() else s, s)
 
 
@@ -335,13 +430,13 @@ def mapping_from_dict(data: object, source: str = "<mapping>") -> ImportMapping:
     cols = []
     try:
         for target, v in cols_raw.items():
-            if isinstance(v, int) and not isinstance(v, bool):
+            if isinstance(v, (int, str)) and not isinstance(v, bool):
                 cols.append(ColumnMap(target, v))
                 continue
             if not isinstance(v, dict) or "column" not in v:
-                raise DataError(f"mapping: {target}: expected a column number or {{\"column\": N, \"scale\": S, "
-                                f"\"offset\": O}}")
-            bad = sorted(set(v) - {"column", "scale", "offset"})
+                raise DataError(f"mapping: {target}: expected a column number or name, or {{\"column\": N, "
+                                f"\"scale\": S, \"offset\": O}} or {{\"column\": N, \"unit\": U}}")
+            bad = sorted(set(v) - {"column", "scale", "offset", "unit"})
             if bad:
                 raise DataError(f"mapping: {target}: unknown key {bad[0]!r}")
             num = {}
@@ -349,7 +444,7 @@ def mapping_from_dict(data: object, source: str = "<mapping>") -> ImportMapping:
                 if name in v:
                     x = v[name]
                     num[name] = (parse_number(x, f"mapping: {target}: {name}") if isinstance(x, str) else x)
-            cols.append(ColumnMap(target, v["column"], **num))
+            cols.append(ColumnMap(target, v["column"], unit=v.get("unit"), **num))
         meta = data.get("meta") or {}
         if not isinstance(meta, dict) or not all(isinstance(x, (str, int, float)) for x in meta.values()):
             raise DataError("mapping: \"meta\" must be an object of strings")
@@ -380,7 +475,8 @@ def mapping_to_dict(mapping: ImportMapping) -> dict:
     """The JSON form of a mapping (``hyst import --preset mrdlab --show-mapping`` prints it)."""
     return {
         "format": MAPPING_FORMAT, "version": MAPPING_VERSION, "name": mapping.name,
-        "columns": {c.target: {"column": c.column, "scale": c.scale, "offset": c.offset} for c in mapping.columns},
+        "columns": {c.target: {"column": c.column, "scale": c.scale, "offset": c.offset,
+                               **({"unit": c.unit} if c.unit is not None else {})} for c in mapping.columns},
         "separator": "whitespace" if mapping.separator is None else mapping.separator,
         "comment": mapping.comment, "skip": mapping.skip, "rate": mapping.rate, "meta": dict(mapping.meta),
         "meta_from_header": [p.regex if p.key is None else f"{p.key}={p.regex}" for p in mapping.meta_from_header],
@@ -401,14 +497,6 @@ def load_mapping(path: str | os.PathLike) -> ImportMapping:
     except json.JSONDecodeError as exc:
         raise DataError(f"{path}: not valid JSON ({exc.msg} at line {exc.lineno})") from None
     return mapping_from_dict(data, source=str(path))
-
-
-CURRENT_UNIT = "mA"
-"""The unit of a run's current columns ``c<k>`` (docs/design.md section 6)."""
-
-CURRENT_UNITS = {"A": 1000.0, "mA": 1.0, "uA": 1e-3}
-"""Current units a log may state (metadata ``current_unit``; mA when it states none), with the
-factor to mA the import applies."""
 
 
 # --------------------------------------------------------------------------------------------
@@ -482,6 +570,8 @@ class ImportOptions:
         Round every value to this many decimals (in the run's units) to keep files small.
     meta : mapping of str to str
         Extra metadata (wins over the mapping's and the header's).
+    zero_time : bool
+        Shift time to start at 0 (an import); False keeps the file's time (``--columns``).
     """
 
     zero: str = "none"
@@ -491,6 +581,7 @@ class ImportOptions:
     time_repair: str = "error"
     decimals: int | None = None
     meta: Mapping[str, str] = field(default_factory=dict)
+    zero_time: bool = True
 
     def __post_init__(self) -> None:
         if self.zero not in ZERO_MODES:
@@ -649,74 +740,242 @@ def _split(line: str, sep: str | None) -> list[str]:
     return line.split() if sep is None else line.split(sep)
 
 
-def _parse_table(text: str, mapping: ImportMapping, source: str
-                 ) -> tuple[list[str], np.ndarray, dict[str, np.ndarray]]:
-    """Header lines, raw line numbers (1-based) of the data rows, and the mapped raw columns."""
+def _is_number(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True
+
+
+SNIFF_LINES = 20
+"""Data lines :func:`sniff_separator` looks at."""
+
+
+def sniff_separator(lines: Sequence[str]) -> str | None:
+    """The field separator of delimited text: comma, tab or semicolon, else None (any whitespace).
+
+    :class:`csv.Sniffer` proposes one of the three from the first :data:`SNIFF_LINES` lines; it
+    is kept only when every one of those lines then splits into the same number (> 1) of fields.
+    The sniffer cannot tell columns aligned by runs of spaces, which are whitespace-separated.
+    """
+    sample = [ln for ln in lines[:SNIFF_LINES] if ln.strip()]
+    if not sample:
+        return None
+    try:
+        sep = csv.Sniffer().sniff("\n".join(sample), delimiters=",\t;").delimiter
+    except csv.Error:
+        return None
+    counts = {len(ln.split(sep)) for ln in sample}
+    return sep if len(counts) == 1 and counts.pop() > 1 else None
+
+
+def _separator_name(sep: str | None) -> str:
+    return {None: "whitespace", ",": "comma", "\t": "tab", ";": "semicolon"}.get(sep, repr(sep))
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Delimited text split into its parts (:func:`split_table`); the cells stay text.
+
+    Attributes
+    ----------
+    header : tuple of str
+        The skipped and the comment lines, in order.
+    names : tuple of str or None
+        The column names of the header row, when the file has one.
+    separator : str or None
+        The separator used (given or sniffed; None: any whitespace).
+    linenos : sequence of int
+        1-based line number of every data row (a range when the rows follow each other).
+    rows : tuple of list of str
+        The fields of every data row, as split (not stripped).
+    """
+
+    header: tuple[str, ...]
+    names: tuple[str, ...] | None
+    separator: str | None
+    linenos: Sequence[int]
+    rows: tuple[list[str], ...]
+
+    def split(self, line: str) -> list[str]:
+        """The fields of one line by this layout's separator."""
+        return _split(line.strip() if self.separator is None else line, self.separator)
+
+
+def split_table(text: str, separator: str | None = ",", comment: str | None = "#", skip: int = 0,
+                names_row: bool | None = False, source: str = "<log>") -> Layout:
+    """Split delimited text into header lines, an optional row of column names and data rows.
+
+    Parameters
+    ----------
+    text : str
+    separator : str or None
+        A separator, None (any whitespace) or ``"auto"`` (:func:`sniff_separator`).
+    comment : str or None
+        Prefix of comment lines, None (none) or ``"auto"`` (any of :data:`COMMENT_PREFIXES`).
+    skip : int
+        Lines skipped at the top.
+    names_row : bool or None
+        Whether the first line after the skipped and comment lines names the columns; None: it
+        does when none of its fields is a number.
+    source : str
+        Name for messages.
+
+    Raises
+    ------
+    DataError
+        No data rows.
+    """
     lines = text.splitlines()
-    header = list(lines[:mapping.skip])
+    header = list(lines[:skip])
+    prefixes = COMMENT_PREFIXES if comment == AUTO else () if comment is None else (comment,)
     data: list[tuple[int, str]] = []
-    for i, line in enumerate(lines[mapping.skip:], start=mapping.skip + 1):
-        if mapping.comment is not None and line.lstrip().startswith(mapping.comment):
+    for i, line in enumerate(lines[skip:], start=skip + 1):
+        if prefixes and line.lstrip().startswith(prefixes):
             header.append(line)
         elif line.strip():
             data.append((i, line))
     if not data:
-        raise DataError(f"{source}: no data rows (after {mapping.skip} skipped lines and "
-                        f"{len(header) - mapping.skip} comment lines)")
-    need = max(c.column for c in mapping.columns)
-    fields = []
-    for lineno, line in data:
-        parts = _split(line.strip() if mapping.separator is None else line, mapping.separator)
+        raise DataError(f"{source}: no data rows (after {skip} skipped lines and "
+                        f"{len(header) - skip} comment lines)")
+    sep = sniff_separator([ln for _, ln in data]) if separator == AUTO else separator
+    layout = Layout((), None, sep, (), ())
+    first = [f.strip() for f in layout.split(data[0][1])]
+    if names_row is None:
+        names_row = not any(_is_number(f) for f in first)
+    names = None
+    if names_row:
+        names = tuple(f.strip("\"'").strip() for f in first)
+        data = data[1:]
+        if not data:
+            raise DataError(f"{source}: no data rows after the header row")
+    return Layout(tuple(header), names, sep, tuple(n for n, _ in data), tuple(layout.split(ln) for _, ln in data))
+
+
+def resolve_columns(columns: Sequence[ColumnMap], layout: Layout, source: str,
+                    as_run: bool = False) -> tuple[tuple[ColumnMap, int], ...]:
+    """Each column mapping with the 0-based index of the raw column it reads.
+
+    A name is looked up in the header row (exactly, else ignoring case); with ``as_run``, header
+    columns named like a run column that no mapping fills or reads are added as they are.
+
+    Raises
+    ------
+    DataError
+        A name the header row lacks (naming the columns it has), a name it has twice, or a name
+        in a file without a header row.
+    """
+    names = layout.names
+    out = []
+    for c in columns:
+        if isinstance(c.column, int):
+            out.append((c, c.column - 1))
+            continue
+        if names is None:
+            raise DataError(f"{source}: {c.target}={c.column}: the file has no header row to find "
+                            f"{c.column!r} in (its first data line is numbers): give the column's number, "
+                            f"{c.target}=N")
+        hits = [j for j, n in enumerate(names) if n == c.column] or \
+            [j for j, n in enumerate(names) if n.lower() == c.column.lower()]
+        if not hits:
+            close = difflib.get_close_matches(c.column, names, 1, 0.6)
+            raise DataError(f"{source}: no column {c.column!r} for {c.target} (the file has "
+                            f"{', '.join(names)})" + (f"; did you mean {close[0]!r}?" if close else ""))
+        if len(hits) > 1:
+            raise DataError(f"{source}: column {c.column!r} appears {len(hits)} times in the header row; "
+                            f"give its number, {c.target}=N")
+        out.append((c, hits[0]))
+    if as_run and names is not None:
+        filled = {c.target for c in columns}
+        read = {j for _, j in out}
+        out += [(ColumnMap(n, j + 1), j) for j, n in enumerate(names)
+                if n in TARGETS and n not in filled and j not in read]
+    return tuple(out)
+
+
+def _names_row(mapping: ImportMapping) -> bool | None:
+    """Whether the first data line names the columns (None: when none of its fields is a number)."""
+    by_name = any(isinstance(c.column, str) for c in mapping.columns)
+    return None if by_name or mapping.separator == AUTO or mapping.as_run else False
+
+
+def _resolve(layout: Layout, mapping: ImportMapping, source: str) -> tuple[tuple[ColumnMap, int], ...]:
+    """:func:`resolve_columns` of the mapping, which must give the time or a rate."""
+    resolved = resolve_columns(mapping.columns, layout, source, mapping.as_run)
+    if not any(c.target == "t" for c, _ in resolved) and mapping.rate is None:
+        found = f" (the file has {', '.join(layout.names)})" if layout.names else ""
+        raise DataError(f"{source}: no time column: map t=COLUMN{found}")
+    return resolved
+
+
+def _parse_table(text: str, mapping: ImportMapping, source: str
+                 ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]]:
+    """The layout, the column mappings by target (with any ``as_run`` additions) and the mapped
+    columns, converted to the run's units."""
+    layout = split_table(text, mapping.separator, mapping.comment, mapping.skip, _names_row(mapping), source)
+    resolved = _resolve(layout, mapping, source)
+    need = max(j for _, j in resolved) + 1
+    for lineno, parts in zip(layout.linenos, layout.rows):
         if len(parts) < need:
             raise DataError(f"{source}: line {lineno} has {len(parts)} fields, the mapping reads column {need} "
-                            f"(separator {mapping.separator or 'whitespace'!r})")
-        fields.append(parts)
-    linenos = np.array([n for n, _ in data])
+                            f"(separator: {_separator_name(layout.separator)})")
+    linenos = np.array(layout.linenos)
     cols: dict[str, np.ndarray] = {}
-    for c in mapping.columns:
-        cells = [row[c.column - 1].strip() for row in fields]
+    for c, j in resolved:
+        cells = [row[j].strip() for row in layout.rows]
+        what = f"column {c.column}" if isinstance(c.column, int) else f"column {c.column!r}"
         try:
             values = np.array(cells, dtype=np.float64)
         except ValueError:
-            values = None
-        if values is None:
-            for j, cell in enumerate(cells):
-                try:
-                    float(cell)
-                except ValueError:
-                    hint = " (skip header lines with --skip N)" if j == 0 else ""
-                    raise DataError(f"{source}: line {linenos[j]}, column {c.column} ({c.target}): "
-                                    f"{cell!r} is not a number{hint}") from None
+            k = next(k for k, cell in enumerate(cells) if not _is_number(cell))
+            hint = " (skip header lines with --skip N)" if k == 0 else ""
+            raise DataError(f"{source}: line {linenos[k]}, {what} ({c.target}): "
+                            f"{cells[k]!r} is not a number{hint}") from None
         bad = ~np.isfinite(values)
         if bad.any():
-            j = int(np.flatnonzero(bad)[0])
-            raise DataError(f"{source}: line {linenos[j]}, column {c.column} ({c.target}): "
-                            f"{cells[j]!r} is not a finite number")
-        cols[c.target] = values * c.scale + c.offset
-    return header, linenos, cols
+            k = int(np.flatnonzero(bad)[0])
+            raise DataError(f"{source}: line {linenos[k]}, {what} ({c.target}): "
+                            f"{cells[k]!r} is not a finite number")
+        values = values * c.factor + c.offset
+        # an import shifts time to start at 0, so only a run's own time must be small already
+        big = np.abs(values) > MAX_ABS_VALUE if c.target != "t" or mapping.as_run else np.zeros(0, bool)
+        if big.any():
+            k = int(np.flatnonzero(big)[0])
+            raise DataError(f"{source}: line {linenos[k]}, {what} ({c.target}): {cells[k]!r} is beyond "
+                            f"+-{MAX_ABS_VALUE:g}, not a plausible angle, current or time")
+        cols[c.target] = values
+    return layout, {c.target: c for c, _ in resolved}, cols
 
 
-def _table_fast(path: Path, mapping: ImportMapping, progress: Callable[[int, int], None] | None = None
-                ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]] | None:
+def _table_fast(path: Path, mapping: ImportMapping, source: str, progress: Callable[[int, int], None] | None = None
+                ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]] | None:
     """:func:`_parse_table` of a log file by a CSV parser with float64 columns, streamed from the
     file (gunzipped on the fly): the log is never held whole, as bytes or as text.
 
     For a log whose rows are plain: after the skipped lines and the comment and blank lines
-    above the first row, no comment or blank line, a one-character (or whitespace) separator,
-    nothing str.splitlines breaks a line at that the parser does not, no NUL byte. None for any
-    other log and for any doubt (a cell that is not a finite number, a short or long row, a
-    corrupt gzip stream): :func:`_parse_table` then reads it and names the problem.
+    above the first row (and a row of names), no comment or blank line, a one-character (or
+    whitespace) separator, nothing str.splitlines breaks a line at that the parser does not, no
+    NUL byte. None for any other log and for any doubt (a cell that is not a finite number, a
+    short or long row, a corrupt gzip stream): :func:`_parse_table` then reads it and names the
+    problem. What both read the same way (the column names, the mapping's columns) raises here
+    as there.
     """
-    sep, comment = mapping.separator, mapping.comment
-    if sep is not None and (len(sep) != 1 or sep in "\r\n\"+-." or sep.isalnum()):
+    prefixes = COMMENT_PREFIXES if mapping.comment == AUTO else () if mapping.comment is None else (mapping.comment,)
+    if any(not p.isascii() or not p.strip() or p[0] in "0123456789+-." for p in prefixes):
         return None
-    if comment is not None and (not comment.isascii() or not comment.strip() or comment[0] in "0123456789+-."):
+    if mapping.separator not in (None, AUTO) and not _plain_separator(mapping.separator):
         return None
     try:
         with _open_log(path) as f:
-            return _stream_table(f, mapping, progress)
+            return _stream_table(f, mapping, tuple(p.encode() for p in prefixes), source, progress)
     except (OSError, EOFError, zlib.error):
         return None   # the line reader's reading says what is wrong with the file
+
+
+def _plain_separator(sep: str | None) -> bool:
+    """Whether the CSV parser splits on ``sep`` as str.split does (None: any whitespace)."""
+    return sep is None or (len(sep) == 1 and sep not in "\r\n\"+-." and not sep.isalnum())
 
 
 def _open_log(path: Path) -> BinaryIO:
@@ -756,13 +1015,13 @@ class _Utf8:
 _BOM = b"\xef\xbb\xbf"
 
 
-def _stream_table(f: BinaryIO, mapping: ImportMapping, progress: Callable[[int, int], None] | None
-                  ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]] | None:
-    comment = mapping.comment.encode() if mapping.comment is not None else None
+def _stream_table(f: BinaryIO, mapping: ImportMapping, prefixes: tuple[bytes, ...], source: str,
+                  progress: Callable[[int, int], None] | None
+                  ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]] | None:
     utf8 = _Utf8()
     head: list[bytes] = []
     lineno, boms = 0, 0
-    while True:  # the head: skipped lines, then comment and blank lines up to the first row
+    while True:  # the head: skipped lines, then comment and blank lines up to the first data line
         start = f.tell()
         line = f.readline()
         if not line or b"\x00" in line or odd_line_breaks(line):
@@ -775,64 +1034,82 @@ def _stream_table(f: BinaryIO, mapping: ImportMapping, progress: Callable[[int, 
         lead = body.lstrip(b" \t")
         if lead[:1] == b"\x1f" or lead[:1] >= b"\x80":
             return None   # whether the line is blank or a comment would depend on its decoding
-        if lineno <= mapping.skip or (comment is not None and lead.startswith(comment)):
+        if lineno <= mapping.skip or (prefixes and lead.startswith(prefixes)):
             head.append(body)
         elif lead.strip():
             break
-    first = lineno
-    # the rows once over: anything that would make the parser's rows differ from the line
-    # reader's, and the lines, so that the columns are allocated once
-    odd = re.compile(rb"\n[ \t\r]*(?:\n" + (b"|" + re.escape(comment) if comment else b"") + b")")
+    # the data lines once over: anything that would make the parser's rows differ from the line
+    # reader's, the first lines (a separator to find, a row of names), and the count of lines,
+    # so that the columns are allocated once
     f.seek(start)
-    lines, size, last = 1, start, b""
+    odd = re.compile(rb"\n[ \t\r]*(?:\n" + b"".join(b"|" + re.escape(p) for p in prefixes) + b")")
+    lines, size, last, first_lines = 1, start, b"", []
     for block in iter(lambda: f.read(1 << 22) + f.readline(), b""):   # whole lines
         if b"\x00" in block or odd_line_breaks(block) or odd.search(b"\n" + last):
             return None
         utf8.feed(block)
+        if len(first_lines) < SNIFF_LINES:
+            first_lines += block.split(b"\n", SNIFF_LINES)[:SNIFF_LINES - len(first_lines)]
         lines += block.count(b"\n")
         size += len(block)
         last = block
-    # blank lines that end the file are no row for either reader
-    if odd.search(b"\n" + last.rstrip(b"\r\n")):
+    if odd.search(b"\n" + last.rstrip(b"\r\n")):   # blank lines that end the file are no row for either
         return None
     encoding = utf8.encoding()
     if boms and encoding != "utf-8":
         return None   # the line reader keeps those bytes, as latin-1 characters
-    cols = _parse_rows(f, start, lines, size, mapping, encoding, progress)
+    text = [ln.decode(encoding).removesuffix("\r") for ln in first_lines if ln.strip()]
+    sep = sniff_separator(text) if mapping.separator == AUTO else mapping.separator
+    if not _plain_separator(sep):
+        return None
+    layout = Layout((), None, sep, (), ())
+    names, first = None, lineno
+    fields = [x.strip() for x in layout.split(text[0])]
+    names_row = _names_row(mapping)
+    if names_row or (names_row is None and not any(_is_number(x) for x in fields)):
+        names = tuple(x.strip("\"'").strip() for x in fields)
+        f.seek(start)
+        start += len(f.readline())
+        first += 1
+    layout = Layout(tuple(line.decode(encoding) for line in head), names, sep, (), ())
+    resolved = _resolve(layout, mapping, source)
+    f.seek(start)
+    cols = _parse_rows(f, lines, size, resolved, mapping, encoding, sep, progress)
     if cols is None:
         return None
     n = len(next(iter(cols.values())))
     # the rows' line numbers (for _time's messages) as a range: no array of the log's length
-    return [line.decode(encoding) for line in head], range(first, first + n), cols
+    return (Layout(layout.header, names, sep, range(first, first + n), ()), {c.target: c for c, _ in resolved},
+            cols)
 
 
-def _parse_rows(f: BinaryIO, start: int, lines: int, size: int, mapping: ImportMapping, encoding: str,
+def _parse_rows(f: BinaryIO, lines: int, size: int, resolved: tuple[tuple[ColumnMap, int], ...],
+                mapping: ImportMapping, encoding: str, sep: str | None,
                 progress: Callable[[int, int], None] | None) -> dict[str, np.ndarray] | None:
-    """The mapped columns of the rows from ``start``, parsed in blocks into preallocated float64
-    arrays, scaled in place; None at any doubt."""
-    import csv
-
+    """The mapped columns of the rows from where ``f`` is, parsed in blocks into preallocated
+    float64 arrays (:func:`hystcli.io.read_csv_blocks`) and scaled in place; None at any doubt."""
     import pandas as pd  # here: the command line's start-up must not pay for pandas
 
-    use = sorted({c.column - 1 for c in mapping.columns})
+    use = sorted({j for _, j in resolved})
     # the numbers float() reads (_parse_table's): pandas 3's parser rounds correctly, 2's only so asked
     exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
-    f.seek(start)
     values = io.read_csv_blocks(f, use, lines, size, progress, usecols=use, encoding=encoding,
-                                sep=r"\s+" if mapping.separator is None else mapping.separator,
-                                quoting=csv.QUOTE_NONE, **exact)
+                                sep=r"\s+" if sep is None else sep, quoting=csv.QUOTE_NONE, **exact)
     if values is None or not all(np.isfinite(v).all() for v in values.values()):
         return None
-    uses = [c.column for c in mapping.columns]
+    uses = [j for _, j in resolved]
     cols: dict[str, np.ndarray] = {}
-    for c in mapping.columns:
-        v = values[c.column - 1]
-        if uses.count(c.column) > 1:
-            cols[c.target] = v * c.scale + c.offset
+    for c, j in resolved:
+        v = values[j]
+        if uses.count(j) > 1:
+            v = v * c.factor + c.offset
         else:  # in place: the array is this reader's and nothing else reads it
-            v *= c.scale
+            v *= c.factor
             v += c.offset
-            cols[c.target] = v
+        # an import shifts time to start at 0, so only a run's own time must be small already
+        if (c.target != "t" or mapping.as_run) and np.any(np.abs(v) > MAX_ABS_VALUE):
+            return None
+        cols[c.target] = v
     return cols
 
 
@@ -850,8 +1127,9 @@ def _time(cols: dict[str, np.ndarray], linenos: Sequence[int], mapping: ImportMa
     if repair == "error":
         j = int(bad[0]) + 1
         what = "repeats" if t[j] == t[j - 1] else "goes back"
+        hint = "hyst check lists every problem" if mapping.as_run else "use --time-repair drop to drop such rows"
         raise DataError(f"{source}: time {what} at line {linenos[j]} ({float(t[j - 1])!r} then {float(t[j])!r}; "
-                        f"{bad.size} non-increasing steps in all): use --time-repair drop to drop such rows")
+                        f"{bad.size} non-increasing steps in all): {hint}")
     # keep a row only when it is later than every row kept before it
     keep = t > np.concatenate(([-np.inf], np.maximum.accumulate(t)[:-1]))
     return {k: v[keep] for k, v in cols.items()}, int(n - keep.sum())
@@ -948,9 +1226,10 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     return _convert(_parse_table(text, mapping, source), mapping, options, source, readme)
 
 
-def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapping: ImportMapping,
+def _convert(table: tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]], mapping: ImportMapping,
              options: ImportOptions, source: str, readme: Sequence[str]) -> Imported:
-    header, linenos, cols = table
+    layout, maps, cols = table
+    header, linenos = list(layout.header), layout.linenos
     rows_read = len(linenos)
     cols, dropped = _time(cols, linenos, mapping, options.time_repair, source)
     warnings: list[str] = []
@@ -960,16 +1239,18 @@ def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapp
     if n < 2:
         raise DataError(f"{source}: only {n} data row(s); a run needs at least 2")
     t_start = float(cols["t"][0])
-    cols["t"] = cols["t"] - t_start
+    if options.zero_time:
+        cols["t"] = cols["t"] - t_start
     steps = np.diff(cols["t"])
     med = float(np.median(steps))
     rate_in = 1.0 / med
-    irregular = bool(steps.max() > _IRREGULAR * med or steps.min() < med / _IRREGULAR)
+    irregular = bool(steps.max() > IRREGULAR * med or steps.min() < med / IRREGULAR)
     step_range = (float(steps.min()), float(steps.max()))
     del steps  # a big log's columns are the memory: no copy of one kept longer than needed
     if irregular and options.resample is None:
         warnings.append(f"irregular sampling (steps {step_range[0]:.6g} .. {step_range[1]:.6g} s around "
-                        f"{med:.6g} s): --resample HZ puts it on a uniform grid")
+                        f"{med:.6g} s): {'hyst import ' if mapping.as_run else ''}--resample HZ puts it on a "
+                        "uniform grid")
 
     flip = mapping.flip_output if options.flip_output is None else options.flip_output
     knobs = sorted({int(k[1]) for k in cols if k[0] in "qyr" and len(k) == 2})
@@ -1013,11 +1294,14 @@ def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapp
         g = gains[k]
         if g is not None and (-g if flip else g) < 0:
             warnings.append(f"knob {k}: the output falls as the input rises (gain {g:.3g}); the hysteresis "
-                            "model needs a rising output: use --flip-output")
+                            "model needs a rising output: "
+                            + (f"negate it, y{k}=NAME:-1" if mapping.as_run else "use --flip-output"))
         knob_reports.append(KnobReport(k, g, bool(flip and (f"y{k}" in cols or f"r{k}" in cols)),
                                        drift, bool(options.detrend and drift is not None), zero))
 
     found: dict[str, str] = {}
+    if mapping.as_run:  # a run CSV's own metadata lines
+        found.update(kv for kv in map(_meta_line, header) if kv is not None)
     for pat in mapping.meta_from_header:
         hit = pat.search(header)
         if not hit:
@@ -1035,18 +1319,21 @@ def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapp
     meta.update(_render_meta({str(k): str(v) for k, v in options.meta.items()}, found, source))
     meta.setdefault("source_file", Path(source).name)
 
-    # motor current in mA, the unit of a run (docs/design.md section 6), from the unit the log states
+    # motor current in mA, the unit of a run (docs/design.md section 6), from the unit the mapping
+    # or else the log states
+    currents = [n for n in cols if n[0] == "c"]
+    unstated = [n for n in currents if maps.get(n) is None or maps[n].unit is None]
     unit = meta.get("current_unit", CURRENT_UNIT)
-    if "current_unit" not in meta and any(name[0] == "c" for name in cols):
+    if "current_unit" not in meta and unstated:
         warnings.append(f"the log states no current unit: the current is taken to be in {CURRENT_UNIT} "
-                        "(--meta current_unit=A if it is in amperes)")
+                        f"(--meta current_unit=A or {unstated[0]}=COLUMN:A if it is in amperes)")
     if unit not in CURRENT_UNITS:
         raise DataError(f"{source}: current_unit {unit!r} is not one of {', '.join(CURRENT_UNITS)} "
                         "(state the log's current unit with --meta current_unit=A, mA or uA)")
     to_ma = CURRENT_UNITS[unit]
-    if any(name[0] == "c" for name in cols):
+    if currents:
         meta["current_unit"] = CURRENT_UNIT
-    for name in [n for n in cols if n[0] == "c"]:
+    for name in unstated:
         # rounded in the log's unit first: --decimals keeps the resolution the log's unit gives
         # (4 decimals of A stay 0.1 mA, not 1e-4 mA), then again so x1000 leaves no float dust
         cols[name] = _round(_round(cols[name], options.decimals) * to_ma, options.decimals)
@@ -1056,7 +1343,7 @@ def _convert(table: tuple[list[str], Sequence[int], dict[str, np.ndarray]], mapp
     if options.decimals is not None and not np.all(np.diff(ordered["t"]) > 0):
         raise DataError(f"{source}: {options.decimals} decimals are too few for the time step "
                         f"({1.0 / (options.resample or rate_in):.3g} s)")
-    current = (unit, to_ma) if any(name[0] == "c" for name in cols) else None
+    current = (unit, to_ma) if unstated else None
     meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased, current)
     for values in ordered.values():
         values.setflags(write=False)  # the conversion's own arrays: the run shares them, no copy
@@ -1126,18 +1413,74 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     p = Path(path)
     name = str(path) if source is None else source
     readme = _readme_lines(p) if mapping.meta_from_readme else []
-    return _convert(_read_table(p, mapping, name, progress), mapping, options, name, readme)
+    table = _table_fast(p, mapping, name, progress) if p.is_file() else None
+    if table is None:   # the line reader: the whole text, every line judged and named
+        table = _parse_table(read_text(p), mapping, name)
+    return _convert(table, mapping, options, name, readme)
 
 
-def _read_table(path: Path, mapping: ImportMapping, source: str, progress: Callable[[int, int], None] | None
-                ) -> tuple[list[str], Sequence[int], dict[str, np.ndarray]]:
-    """The mapped columns of a log file: streamed through the CSV parser where it can
-    (:func:`_table_fast`), else read whole and line by line (:func:`_parse_table`)."""
-    if path.is_file():
-        table = _table_fast(path, mapping, progress)
-        if table is not None:
-            return table
-    return _parse_table(read_text(path), mapping, source)
+def columns_mapping(spec: str | Sequence[ColumnMap]) -> ImportMapping:
+    """The mapping of ``--columns``: a user's own CSV read as a run (:func:`read_mapped`).
+
+    Any separator and a header row are found from the file, ``#`` and ``%`` lines are comments
+    (``# key: value`` ones metadata), a column the spec does not name keeps its name when it is
+    already a run column's, and a current without a unit is in mA (the run's unit).
+
+    Raises
+    ------
+    DataError
+        A malformed spec or a target given twice.
+    """
+    columns = parse_map_spec(spec) if isinstance(spec, str) else tuple(spec)
+    return ImportMapping(columns=columns, separator=AUTO, comment=AUTO, name="--columns",
+                         meta={"current_unit": CURRENT_UNIT}, as_run=True)
+
+
+def read_mapped(path: str | os.PathLike, mapping: ImportMapping, require: Iterable[str] = ("t",),
+                progress: Callable[[int, int], None] | None = None) -> Imported:
+    """Read a user's own CSV as a run through a one-off mapping (:func:`columns_mapping`).
+
+    Unlike an import, time keeps its values; what an import would warn about (irregular
+    sampling, a falling output) is in the report's warnings.
+
+    Raises
+    ------
+    DataError
+        What :func:`convert` raises, and a column in ``require`` the mapped run lacks.
+    """
+    imported = convert(path, mapping, ImportOptions(zero_time=False), progress=progress)
+    imported.run.require(*require)
+    return imported
+
+
+_GUESSES = (("t", ("t", "time", "timestamp", "time_s", "t_s", "sec", "seconds")),
+            ("q", ("q", "knob", "knob_deg", "knob_angle", "motor", "motor_angle", "input", "encoder")),
+            ("y", ("y", "tip", "tip_deg", "tip_angle", "bend", "bending", "output")),
+            ("c", ("c", "current", "current_ma", "i", "motor_current", "amps")),
+            ("r", ("r", "ref", "reference", "target", "desired")))
+_SUFFIX_UNITS = {"ms": "ms", "us": "us", "rad": "rad", "a": "A", "amps": "A"}
+
+
+def suggest_columns(names: Sequence[str]) -> str | None:
+    """A ``--columns`` spec guessed from a header row's names (``time_s`` -> ``t``, ``knob_deg`` ->
+    ``q1``, ``current_A`` -> ``c1=current_A:A``), or None when no time column can be guessed.
+
+    A guess for a message, never applied: the user reads it and types it.
+    """
+    found: dict[str, str] = {}
+    for name in names:
+        low = name.strip().lower().replace(" ", "_").replace("-", "_")
+        stem, _, suffix = low.rpartition("_")
+        for kind, words in _GUESSES:
+            if (low in words or stem in words) and kind not in found:
+                unit = _SUFFIX_UNITS.get(suffix) if stem in words else None
+                if unit is not None and _unit(kind if kind == "t" else kind + "1", unit) is None:
+                    unit = None
+                found[kind] = f"{name}:{unit}" if unit else name
+                break
+    if "t" not in found:
+        return None
+    return ",".join(f"{k if k == 't' else k + '1'}={v}" for k, v in found.items())
 
 
 def output_name(path: str | os.PathLike) -> str:

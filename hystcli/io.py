@@ -853,16 +853,17 @@ def file_sha256(path: str | os.PathLike) -> str:
 
 
 def provenance(source: str | os.PathLike | None, **extra: object) -> dict:
-    """Model metadata: the source file, its hash and, for reproducibility, no wall-clock time.
+    """Model metadata: the source file, its hash, its modification time and no wall-clock time.
 
-    ``created`` is the source file's modification time, not now, so that the same command on the
-    same input gives the same bytes (house rule 6).
+    ``source_modified`` is when the source file was last written (UTC); the model records no time
+    of its own making, so that the same command on the same input gives the same bytes.
     """
     meta: dict = {}
     if source is not None:
         meta["source"] = Path(source).name
         meta["sha256"] = file_sha256(source)
         mtime = os.stat(source).st_mtime
-        meta["created"] = _dt.datetime.fromtimestamp(mtime, _dt.timezone.utc).replace(microsecond=0).isoformat()
+        meta["source_modified"] = _dt.datetime.fromtimestamp(mtime, _dt.timezone.utc).replace(
+            microsecond=0).isoformat()
     meta.update({k: v for k, v in extra.items() if v is not None})
     return meta

@@ -30,6 +30,7 @@ import csv
 import io as _io
 import json
 import re
+import textwrap
 from dataclasses import dataclass, field
 from typing import Iterable, Sequence
 
@@ -475,12 +476,18 @@ class Table:
         Human headers (text and Markdown).
     rows : tuple of tuple
         Cells: str, int, float or None (not applicable).
+    notes : tuple of str
+        Lines below the table.
+    keys : int
+        Leading columns that name a row: a text table too wide for its width repeats them beside
+        each slice of the other columns (:func:`format_text`).
     """
 
     columns: tuple[str, ...]
     headers: tuple[str, ...]
     rows: tuple[tuple[Cell, ...], ...]
     notes: tuple[str, ...] = field(default=())
+    keys: int = 1
 
 
 def group_table(evaluation: Evaluation) -> Table:
@@ -505,7 +512,7 @@ def group_table(evaluation: Evaluation) -> Table:
     if with_imp:
         notes += ("improvement % = (base - new) / base * 100 on the means, against controller none "
                   "and comp in the same group",)
-    return Table(tuple(cols), tuple(heads), tuple(rows), notes)
+    return Table(tuple(cols), tuple(heads), tuple(rows), notes, keys=max(1, len(evaluation.group_by)))
 
 
 def run_table(evaluation: Evaluation) -> Table:
@@ -514,7 +521,7 @@ def run_table(evaluation: Evaluation) -> Table:
     heads = cols[:8] + ("PTPE", "RMSE")
     rows = tuple((r.source, r.knob, r.catheter, r.controller, r.shape, r.motion, r.trial, r.n,
                   r.ptpe, r.rmse) for r in evaluation.results)
-    return Table(cols, heads, rows, ("PTPE and RMSE of y - r per run and knob, deg",))
+    return Table(cols, heads, rows, ("PTPE and RMSE of y - r per run and knob, deg",), keys=2)
 
 
 def _cell_text(value: Cell, digits: int) -> str:
@@ -529,19 +536,52 @@ def _numeric(value: Cell) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-def format_text(table: Table, digits: int = 2) -> str:
-    """Aligned plain text: strings left-aligned, numbers right-aligned, notes below."""
+TEXT_WIDTH = 100
+"""Widest line of a text table: wider tables are cut into slices of columns, the row's key columns
+repeated beside each, and notes are wrapped."""
+
+
+def _slices(widths: Sequence[int], keys: int, width: int) -> list[list[int]]:
+    """Column indices of each slice of a text table: the key columns, then as many of the others as
+    fit ``width`` (at least one each)."""
+    keys = min(keys, len(widths))
+    base = sum(widths[:keys]) + 2 * keys
+    out: list[list[int]] = []
+    used = base
+    for j in range(keys, len(widths)):
+        if out and out[-1][keys:] and used + widths[j] > width:
+            used = base
+            out.append(list(range(keys)))
+        if not out:
+            out.append(list(range(keys)))
+        out[-1].append(j)
+        used += widths[j] + 2
+    return out or [list(range(len(widths)))]
+
+
+def format_text(table: Table, digits: int = 2, width: int = TEXT_WIDTH) -> str:
+    """Aligned plain text: strings left-aligned, numbers right-aligned, notes below.
+
+    A table wider than ``width`` comes in slices of columns one under the other, each with the
+    table's key columns (:attr:`Table.keys`); notes are wrapped to ``width``.
+    """
     cells = [[_cell_text(v, digits) for v in row] for row in table.rows]
     numeric = [any(_numeric(row[j]) for row in table.rows) for j in range(len(table.headers))]
     widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(table.headers)]
 
-    def line(items: Sequence[str]) -> str:
-        return "  ".join(s.rjust(w) if num else s.ljust(w)
-                         for s, w, num in zip(items, widths, numeric)).rstrip()
+    def line(items: Sequence[str], cols: Sequence[int]) -> str:
+        return "  ".join(items[j].rjust(widths[j]) if numeric[j] else items[j].ljust(widths[j])
+                         for j in cols).rstrip()
 
-    out = [line(table.headers), line(["-" * w for w in widths])]
-    out += [line(r) for r in cells]
-    out += [""] + list(table.notes) if table.notes else []
+    out: list[str] = []
+    for cols in _slices(widths, table.keys, width):
+        if out:
+            out.append("")
+        out += [line(table.headers, cols), line(["-" * w for w in widths], cols)]
+        out += [line(r, cols) for r in cells]
+    if table.notes:
+        out += [""] + [wrapped for note in table.notes
+                       for wrapped in textwrap.wrap(note, width, break_on_hyphens=False) or [""]]
     return "\n".join(out) + "\n"
 
 

@@ -520,6 +520,9 @@ class KnobIdentification:
         the knob, not this level): how Algorithm 1 tells a take-up from a held load.
     current_noise : float or None
         Per-sample noise of the conditioned current.
+    current_min, current_max : float or None
+        The sweep's lowest and highest current: the most it loaded each tendon (Algorithm 1 loads
+        none further).
     cogging_period, cogging_sin, cogging_cos : float or None
         The motor's cogging ripple (period, deg; amplitudes), None where the sweep showed none.
     """
@@ -539,12 +542,14 @@ class KnobIdentification:
     edge_level_pos: float | None = None
     edge_level_neg: float | None = None
     current_noise: float | None = None
+    current_min: float | None = None
+    current_max: float | None = None
     cogging_period: float | None = None
     cogging_sin: float | None = None
     cogging_cos: float | None = None
 
     OPTIONAL = ("no_load_rising", "no_load_falling", "slope_loaded_pos", "slope_loaded_neg", "edge_level_pos",
-                "edge_level_neg", "current_noise",
+                "edge_level_neg", "current_noise", "current_min", "current_max",
                 "cogging_period", "cogging_sin", "cogging_cos")
     """Numeric fields a model file may leave out."""
 
@@ -612,7 +617,7 @@ class Model:
     effects : tuple of EffectSpec
         Unmodelled effects added by ``hyst diagnose``.
     meta : mapping
-        Free-form provenance (catheter, source, sha256, created).
+        Free-form provenance (catheter, source, sha256, source_modified).
     identification : mapping of int to KnobIdentification
         What identification learnt per knob (current-slope levels, range, uncertainties).
     """

@@ -184,7 +184,7 @@ def model_of(series: str, name: str) -> tuple[Model, float]:
     if key not in _IDENT:
         # a record that cannot fix a parameter still predicts: the study keeps the fit (with a
         # warning), as it needs the prediction, not the edges Algorithm 1 reads
-        ident = identify(run_of(series, name), refuse_unfixed=False)
+        ident = identify(run_of(series, name))
         _IDENT[key] = (ident.model, ident.fits[1].rmse)
     return _IDENT[key]
 

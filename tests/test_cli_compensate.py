@@ -151,7 +151,7 @@ def test_travel_is_never_waived(files):
 
 
 @pytest.mark.parametrize("bad", [["--max-speed", "nan"], ["--max-speed", "0"], ["--travel-limit", "-1"],
-                                 ["--max-accel", "inf"], ["--format", "csv"]])
+                                 ["--max-accel", "inf"], ["--format", "xml"]])
 def test_bad_limit_options_are_usage_errors(files, bad):
     out = files / "cmd.csv"
     res = invoke("compensate", files / "traj.csv", "--model", files / "model.json", "-o", out, *bad)

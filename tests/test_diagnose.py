@@ -87,6 +87,22 @@ def test_effect_free_data_reports_no_effect_and_describes_the_residual():
     assert d.how_far.rmse_shrink_pct == 0.0
 
 
+def test_the_figure_draws_small_shares_small():
+    # effect-free runs: what the residual follows explains a few percent at most; on the figure's
+    # 0-100 % axis such a bar stays a sliver, labelled with its value
+    from hystcli.diagnose import diagnosis_axes
+
+    runs = make_runs((), seed=2)
+    d = diagnose(BASE, runs)
+    fig = diagnosis_axes(d, runs)
+    shares, speeds, follows = fig.axes[:3]
+    assert shares.get_ylim() == speeds.get_ylim() == (0.0, 100.0)
+    assert follows.get_xlim() == (0.0, 100.0)
+    widths = [p.get_width() for p in follows.patches]
+    assert widths and max(widths) < 10.0
+    assert [t.get_text() for t in follows.texts] == [f"{a.explained_pct:.1f} %" for a in d.where.follows]
+
+
 def _load_runs(loads, stretch, seed=0):
     """Sine runs of knob 1 at the given load conditions (metadata ``condition``), tip from the
     model with ``stretch`` plus 0.2 deg of seeded noise."""

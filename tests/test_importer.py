@@ -280,7 +280,9 @@ def test_map_spec_parsing():
 @pytest.mark.parametrize("spec, message", [
     ("z1=2", "unknown target column 'z1'"),
     ("q1=0", "columns count from 1"),
-    ("q1=two", "not a whole number"),
+    ("q1=", "expected target=column"),
+    ("q1=knob:parsec", "'parsec' is not a number or an angle unit"),
+    ("c1=I:rad", "'rad' is not a number or a current unit"),
     ("q1=2:abc", "'abc' is not a number"),
     ("q1=2:0", "scale 0"),
     ("q1=2:inf", "not a finite number"),
@@ -519,3 +521,106 @@ def test_gain_and_drift_are_least_squares(n, freq, gain, drift, offset, seed):
         size = np.linalg.norm(a, axis=0)
         assert abs(got_gain - want[0]) * size[0] <= 1e-10 * np.linalg.norm(y)
         assert abs(got_drift - want[2]) * size[2] <= 1e-10 * np.linalg.norm(y)
+
+
+# --------------------------------------------------------------------------------------------
+# columns by name, units, and what the file's own layout says
+# --------------------------------------------------------------------------------------------
+USER_TSV = ("# bench log, knob 1\n"
+            "time_ms\tknob_rad\ttip_deg\tI_A\n"
+            "0\t0.0\t1.5\t0.010\n"
+            "10\t0.5\t2.5\t0.020\n"
+            "20\t1.0\t3.5\t-0.005\n")
+
+
+def test_map_spec_takes_names_and_units():
+    cols = importer.parse_map_spec("t=time_ms:ms,q1=knob_rad:rad,y1=tip_deg,c1=I_A:A,r1=3:2:0.5")
+    assert cols[0] == ColumnMap("t", "time_ms", unit="ms") and cols[0].factor == 1e-3
+    assert cols[1].unit == "rad" and cols[1].factor == pytest.approx(180 / math.pi)
+    assert cols[2] == ColumnMap("y1", "tip_deg")
+    assert cols[3].unit == "A" and cols[3].factor == 1000.0
+    assert cols[4] == ColumnMap("r1", 3, 2.0, 0.5)  # a number is still a column number, then scale, offset
+    assert importer.parse_map_spec("c1=I:a")[0].unit == "A"  # units ignore case
+    assert [c.spec() for c in cols[:2]] == ["t=time_ms:ms", "q1=knob_rad:rad"]
+    with pytest.raises(DataError, match="a unit or a scale, not both"):
+        ColumnMap("t", 1, 0.5, unit="ms")
+
+
+def test_names_units_tab_and_comment_lines_are_read_from_the_file():
+    m = ImportMapping(columns=importer.parse_map_spec("t=time_ms:ms,q1=knob_rad:rad,y1=tip_deg,c1=I_A:A"),
+                      separator=importer.AUTO, comment=importer.AUTO)
+    imp = importer.convert_text(USER_TSV, m)
+    np.testing.assert_allclose(imp.run["t"], [0.0, 0.01, 0.02])
+    np.testing.assert_allclose(imp.run["q1"], [0.0, 28.64788975654116, 57.29577951308232])  # 0.5 rad in deg
+    np.testing.assert_allclose(imp.run["c1"], [10.0, 20.0, -5.0])  # A to mA by the mapping's unit
+    assert imp.run.meta["current_unit"] == "mA"
+    assert not any("current unit" in w for w in imp.report.warnings)  # the unit is stated
+
+
+@pytest.mark.parametrize("sep", [",", "\t", ";", "   "])
+def test_separator_and_header_row_are_sniffed(sep):
+    text = "% a comment\n" + "\n".join(sep.join(row) for row in
+                                       [["time", "knob", "tip"], ["0", "1.5", "2"], ["0.5", "3", "4"]]) + "\n"
+    m = ImportMapping(columns=importer.parse_map_spec("t=time,q1=knob,y1=3"), separator=importer.AUTO,
+                      comment=importer.AUTO)
+    imp = importer.convert_text(text, m)
+    np.testing.assert_array_equal(imp.run["q1"], [1.5, 3.0])
+    np.testing.assert_array_equal(imp.run["y1"], [2.0, 4.0])
+    layout = importer.split_table(text, importer.AUTO, importer.AUTO, names_row=None)
+    assert layout.names == ("time", "knob", "tip") and layout.separator == (None if sep == "   " else sep)
+
+
+def test_a_header_row_is_found_when_columns_are_numbers_too():
+    text = "t,q,y\n0,1,2\n1,3,4\n"
+    m = ImportMapping(columns=importer.parse_map_spec("t=1,q1=2"), separator=importer.AUTO)
+    np.testing.assert_array_equal(importer.convert_text(text, m).run["q1"], [1.0, 3.0])
+
+
+def test_a_name_the_file_lacks_names_the_columns_it_has():
+    m = ImportMapping(columns=importer.parse_map_spec("t=time_ms:ms,q1=knob"), separator=importer.AUTO,
+                      comment=importer.AUTO)
+    with pytest.raises(DataError) as err:
+        importer.convert_text(USER_TSV, m, source="log.tsv")
+    assert str(err.value) == ("log.tsv: no column 'knob' for q1 (the file has time_ms, knob_rad, tip_deg, I_A); "
+                              "did you mean 'knob_rad'?")
+    m = ImportMapping(columns=importer.parse_map_spec("t=time,q1=2"), separator=importer.AUTO)
+    with pytest.raises(DataError, match="no header row to find 'time' in"):
+        importer.convert_text("0,1\n1,2\n", m)
+
+
+def test_columns_mapping_keeps_run_columns_and_metadata_and_time(tmp_path):
+    p = tmp_path / "r.csv"
+    p.write_text("# shape: alpha=45\n# catheter: mine\nt,q1,tip\n5.0,1,2\n5.5,2,3\n")
+    imp = importer.read_mapped(p, importer.columns_mapping("y1=tip"), require=("t", "q1", "y1"))
+    assert list(imp.run.columns) == ["t", "q1", "y1"]
+    np.testing.assert_array_equal(imp.run["t"], [5.0, 5.5])  # time kept, not shifted to 0
+    assert imp.run.meta["shape"] == "alpha=45" and imp.run.meta["catheter"] == "mine"
+    with pytest.raises(DataError, match=r"missing column 'c1' \(columns: t, q1, y1\)"):
+        importer.read_mapped(p, importer.columns_mapping("y1=tip"), require=("t", "c1"))
+    p.write_text("time,q1\n0,1\n1,2\n")
+    with pytest.raises(DataError, match=r"no time column: map t=COLUMN \(the file has time, q1\)"):
+        importer.read_mapped(p, importer.columns_mapping("y1=2"))
+
+
+def test_columns_mapping_refuses_what_a_run_refuses(tmp_path):
+    p = tmp_path / "r.csv"
+    p.write_text("time,knob\n0,1\n1,1e308\n")
+    with pytest.raises(DataError, match=r"line 3, column 'knob' \(q1\): '1e308' is beyond"):
+        importer.read_mapped(p, importer.columns_mapping("t=time,q1=knob"))
+    p.write_text("time,knob\n0,1\n0,2\n")
+    with pytest.raises(DataError, match="time repeats at line 3"):
+        importer.read_mapped(p, importer.columns_mapping("t=time,q1=knob"))
+
+
+def test_suggested_columns_come_from_the_names():
+    assert importer.suggest_columns(["time_s", "knob_deg", "tip_deg", "current_mA"]) == \
+        "t=time_s,q1=knob_deg,y1=tip_deg,c1=current_mA"
+    assert importer.suggest_columns(["Time_ms", "knob_rad", "current_A"]) == \
+        "t=Time_ms:ms,q1=knob_rad:rad,c1=current_A:A"
+    assert importer.suggest_columns(["a", "b"]) is None
+
+
+def test_mapping_json_takes_names_and_units():
+    m = importer.mapping_from_dict({"columns": {"t": {"column": "time_ms", "unit": "ms"}, "q1": "knob"}})
+    assert m.column("t") == ColumnMap("t", "time_ms", unit="ms") and m.column("q1").column == "knob"
+    assert importer.mapping_from_dict(importer.mapping_to_dict(m)).columns == m.columns

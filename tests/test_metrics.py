@@ -298,13 +298,25 @@ def test_json_single_trial_std_is_null():
 
 
 def test_text_format(ev):
-    lines = format_text(group_table(ev)).splitlines()
+    lines = format_text(group_table(ev), width=200).splitlines()
     assert lines[0].split()[:4] == ["controller", "shape", "motion", "n"]
     comp = next(line.split() for line in lines if line.startswith("comp "))
     # comp: n 2, PTPE (2, 0), RMSE (1, 0), 66.67 / 69.23 % vs none, nothing vs comp
     assert comp == ["comp", "straight", "periodic", "2", "2.00", "0.00", "1.00", "0.00",
                     "66.67", "69.23", "-", "-"]
     assert any("ddof=1" in line for line in lines)
+
+
+def test_a_wide_text_table_comes_in_slices_with_its_keys(ev):
+    wide = format_text(group_table(ev), width=200).splitlines()
+    assert max(map(len, wide)) > 100  # the evaluation table is wider than the default
+    lines = format_text(group_table(ev)).splitlines()
+    assert max(map(len, lines)) <= 100
+    # each slice starts with the three grouping columns; together they hold every cell once
+    comp = [line.split() for line in lines if line.startswith("comp ")]
+    assert len(comp) >= 2 and all(part[:3] == ["comp", "straight", "periodic"] for part in comp)
+    assert comp[0] + [cell for part in comp[1:] for cell in part[3:]] == \
+        next(line.split() for line in wide if line.startswith("comp "))
 
 
 def test_markdown_format(ev):

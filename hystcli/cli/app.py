@@ -21,13 +21,50 @@ from pathlib import Path
 from typing import Annotated, Any, Callable, Iterator, List, NoReturn, Optional
 
 import typer
-from typer.core import TyperArgument, TyperCommand
+from typer.core import TyperArgument, TyperCommand, TyperGroup
 
 from .. import __version__
 from ..errors import HystError
 
+HELP_PANELS: dict[str, tuple[str, ...]] = {
+    "Calibrate": ("identify", "check", "import"),
+    "On the robot": ("detect-shift", "compensate", "track", "play", "sweep", "status", "home", "jog",
+                     "sim-robot"),
+    "Evaluate": ("evaluate", "diagnose", "predict"),
+    "Simulate": ("simulate", "demo"),
+    "Data and models": ("show", "diff", "rotate-shift"),
+}
+"""The panels of ``hyst --help`` in workflow order, each with its commands in order."""
+
+SUMMARY_WIDTH = 60
+"""Longest one-line summary of a command: with the longest command name it fits 80 columns."""
+
+
+class _Group(TyperGroup):
+    """The ``hyst`` group: commands listed in :data:`HELP_PANELS`' panels and order, each with its
+    one-line summary whole (never cut with "...").
+
+    Plain text rather than typer's rich panels: ``hyst --help`` must not import rich (start-up
+    time, ``tests/test_cli_startup.py``). Each command also carries its panel as typer's
+    ``rich_help_panel``, so a rich help would group them the same way.
+    """
+
+    def format_commands(self, ctx: Any, formatter: Any) -> None:
+        shown = {name: cmd for name, cmd in self.commands.items() if not cmd.hidden}
+        panels = [(title, [n for n in names if n in shown]) for title, names in HELP_PANELS.items()]
+        listed = {n for _, names in panels for n in names}
+        panels.append(("Other commands", [n for n in shown if n not in listed]))
+        width = max(map(len, shown), default=0)  # one column for the summaries across the panels
+        for title, names in panels:
+            if names:
+                with formatter.section(title):
+                    formatter.write_dl([(n.ljust(width), shown[n].get_short_help_str(limit=10 ** 6))
+                                        for n in names])
+
+
 app = typer.Typer(
     name="hyst",
+    cls=_Group,
     help="Shape-adaptive hysteresis calibration and evaluation for tendon-driven catheter robots.",
     no_args_is_help=True,
     add_completion=True,
@@ -165,8 +202,22 @@ class _Command(TyperCommand):
                 for piece in super().collect_usage_pieces(ctx)]
 
 
-def command(name: str | None = None, **kwargs: Any) -> Callable:
-    """Register a command on :data:`app`, turning hyst errors into ``Error: ...`` and exit 1."""
+def command(name: str, summary: str, **kwargs: Any) -> Callable:
+    """Register a command on :data:`app`, turning hyst errors into ``Error: ...`` and exit 1.
+
+    Parameters
+    ----------
+    name : str
+        The command's name; its panel in ``hyst --help`` is the one :data:`HELP_PANELS` lists it in.
+    summary : str
+        Its one line in ``hyst --help`` (at most :data:`SUMMARY_WIDTH` characters, no final
+        period).
+    **kwargs
+        Passed to typer (``help``, ``epilog``, ...).
+    """
+    if len(summary) > SUMMARY_WIDTH:
+        raise ValueError(f"{name}: summary of {len(summary)} characters, at most {SUMMARY_WIDTH}")
+    panel = next((title for title, names in HELP_PANELS.items() if name in names), None)
 
     def decorator(func: Callable) -> Callable:
         @functools.wraps(func)
@@ -180,7 +231,8 @@ def command(name: str | None = None, **kwargs: Any) -> Callable:
             except OSError as exc:
                 fail(f"{exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}")
 
-        return app.command(name=name, cls=_Command, **kwargs)(wrapper)
+        return app.command(name=name, cls=_Command, short_help=summary, rich_help_panel=panel,
+                           **kwargs)(wrapper)
 
     return decorator
 
@@ -188,6 +240,14 @@ def command(name: str | None = None, **kwargs: Any) -> Callable:
 # --------------------------------------------------------------------------------------------
 # shared options (house rule 7: declared once)
 # --------------------------------------------------------------------------------------------
+class CurrentSign(str, Enum):
+    """How a drive reports its motor current (:data:`hystcli.settings.CURRENT_SIGNS`)."""
+
+    auto = "auto"
+    signed = "signed"
+    magnitude = "magnitude"
+
+
 class OutputFormat(str, Enum):
     table = "table"
     json = "json"
@@ -209,6 +269,73 @@ BaudOpt = Annotated[int, typer.Option("--baud", help="Baud rate of the serial po
 EffectOpt = Annotated[Optional[List[str]], typer.Option(
     "--effect", help="Unmodelled effect NAME[:param=value,...] (repeatable; 'none' for none; "
                      "default: the catheter's own).")]
+
+
+ColumnsOpt = Annotated[Optional[str], typer.Option(
+    "--columns", metavar="t=NAME,q1=NAME[:UNIT],...",
+    help="Read your own CSV: which of its columns (by header name, or number from 1) is t, q1, y1, "
+         "c1, ..., each with an optional unit (ms, rad, A, ...) or scale. Any separator; # and % "
+         "lines are comments. The syntax of `hyst import --map`.", show_default=False)]
+KnobsAliasOpt = Annotated[Optional[List[str]], typer.Option("--knobs", hidden=True)]  # the old spelling
+
+
+def one_of(value: Any, alias: Any, name: str, alias_name: str) -> Any:
+    """The value given under an option's name or under its hidden old alias (usage error: both)."""
+    given = [v for v in (value, alias) if v is not None and v != [] and v != ()]
+    if len(given) == 2:
+        usage_error(f"give {name} once (not also {alias_name}, its old spelling)", name)
+    return given[0] if given else None
+
+
+def parse_knobs(values: Optional[List[str]], option: str = "--knob", most: int = 2) -> tuple[int, ...] | None:
+    """``--knob`` values (``1``, ``2``, ``1,2``, repeatable) -> the knobs in order; None when not given.
+    Anything else, a knob given twice included (likely a typo for another), is a usage error."""
+    if not values:
+        return None
+    out: list[int] = []
+    for part in (p.strip() for v in values for p in str(v).split(",")):
+        if not (part.isdigit() and 1 <= int(part) <= most):
+            allowed = "1, 2 or 1,2" if most == 2 else f"knob numbers 1 to {most}, comma-separated"
+            usage_error(f"{','.join(values)!r}: expected {allowed}", option)
+        if int(part) in out:
+            usage_error(f"{','.join(values)!r}: knob {part} is given twice", option)
+        out.append(int(part))
+    return tuple(out)
+
+
+def only_formats(fmt: "OutputFormat", command_name: str, *allowed: "OutputFormat") -> None:
+    """Usage error when a command's output is no table for ``--format`` csv/markdown/latex."""
+    if fmt not in allowed:
+        usage_error(f"{command_name} prints {', '.join(a.value for a in allowed)}, not {fmt.value}", "--format")
+
+
+def columns_mapping(spec: Optional[str]) -> Any:
+    """The ``--columns`` mapping (:func:`hystcli.importer.columns_mapping`), or None; a malformed
+    spec is a usage error."""
+    if spec is None:
+        return None
+    from .. import importer
+
+    with option_errors("--columns"):
+        return importer.columns_mapping(spec)
+
+
+def load_run(path: Path, columns: Any = None, require: tuple[str, ...] = ("t",), quiet: bool = False) -> Any:
+    """Read one run CSV, or a user's own CSV through a ``--columns`` mapping (from
+    :func:`columns_mapping`), warning on stderr about what the mapping's reading found; a big file
+    shows its reading on a terminal (:func:`reading`)."""
+    from .. import io
+
+    with reading(path, quiet) as progress:
+        if columns is None:
+            return io.read_run(path, require=require, progress=progress)
+        from .. import importer
+
+        imported = importer.read_mapped(path, columns, require=require, progress=progress)
+    if not quiet:
+        for w in imported.report.warnings:
+            warn(f"{path}: {w}")
+    return imported.run
 
 
 def effects_option(values: Optional[List[str]]) -> tuple | None:

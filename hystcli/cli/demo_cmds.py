@@ -6,24 +6,18 @@ Parses the options, calls :func:`hystcli.experiment.run_protocol`, prints what
 from __future__ import annotations
 
 import time
-from enum import Enum
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
 from ..errors import DataError
-from .app import QuietOpt, SeedOpt, command, info, progress, prints, usage_error
-
-
-class DemoFormat(str, Enum):
-    table = "table"
-    json = "json"
-    markdown = "markdown"
+from .app import (FormatOpt, OutputFormat, QuietOpt, SeedOpt, command, info, only_formats, progress, prints,
+                  usage_error)
 
 
 @command(
-    "demo",
+    "demo", "The paper's whole experiment on the virtual catheters",
     help=(
         "Run the paper's whole experiment (Kim & Mansi, section III) on the calibrated virtual "
         "catheters and print Tables I and II beside the paper's values.\n\n"
@@ -50,7 +44,7 @@ def demo(
     trials: Annotated[int, typer.Option("--trials", min=1, max=20, help="Trials per run (different "
                                         "sensor noise each).")] = 3,
     seed: SeedOpt = 0,
-    fmt: Annotated[DemoFormat, typer.Option("--format", "-f", help="Output format on stdout.")] = DemoFormat.table,
+    fmt: FormatOpt = OutputFormat.table,
     simulate: Annotated[bool, typer.Option("--simulate", help="Record the sweeps and replays from the "
                                            "twin instead of reading --data.")] = False,
     no_figures: Annotated[bool, typer.Option("--no-figures", help="Write no figures.")] = False,
@@ -60,6 +54,7 @@ def demo(
 ) -> None:
     from .. import experiment
 
+    only_formats(fmt, "demo", OutputFormat.table, OutputFormat.json, OutputFormat.markdown)
     if simulate and data is not None:
         usage_error("give --data DIR or --simulate, not both", "--data / --simulate")
     if data is not None and not data.is_dir():
@@ -84,4 +79,8 @@ def demo(
     if prints(fmt, quiet):
         typer.echo(text, nl=False)
     info(f"wrote {', '.join(str(p) for p in written)}", quiet)
-    info(f"demo took {elapsed:.1f} s ({len(result.runs)} runs)", quiet)
+    # the same count as the progress's last [done/total]: every step, each kind named
+    steps = {"identifications": len(result.models), "shift detections": len(result.shifts),
+             "runs": len(result.runs), "diagnoses": len(result.diagnoses)}
+    info(f"demo took {elapsed:.1f} s ({sum(steps.values())} steps: "
+         + ", ".join(f"{n} {what}" for what, n in steps.items() if n) + ")", quiet)

@@ -20,14 +20,16 @@ from ..calibration import CALIBRATED_NAMES, calibrated_catheter
 from ..errors import DataError, HystError
 from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
-from .app import (BaudOpt, EffectOpt, OutOpt, QuietOpt, command, echo_json, effects_option,
-                  fail, info, stderr_is_tty, warn)
-from .robot_opts import (AllowFastOpt, NoReturnOpt, FormatTJOpt, MaxSpeedOpt, MoveSpeedOpt, StrictSpeedOpt,
-                         TableOrJson, TimeoutOpt, TravelLimitOpt, finite, limit_hint, limits, positive,
-                         speed_mode)
+from .app import (BaudOpt, ColumnsOpt, EffectOpt, FormatOpt, KnobsAliasOpt, OutOpt, OutputFormat, QuietOpt,
+                  columns_mapping, command, echo_json, echo_table, effects_option, fail, info, load_run, one_of,
+                  parse_knobs, stderr_is_tty, warn)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, MaxSpeedOpt, MoveSpeedOpt, StrictSpeedOpt,
+                         TimeoutOpt, TravelLimitOpt, finite, limit_hint, limits, positive, speed_mode)
 
 PortArg = Annotated[str, typer.Option("--port", help="Serial port of the robot (name or pyserial URL).",
                                       show_default=False)]
+MAX_KNOB = 9
+"""Highest knob number a robot may announce (the line protocol's knobs are 1 to 9)."""
 DEVICE_TIMEOUT = 1.0
 """Default reply deadline (s) of the device commands: a robot controller answers in
 milliseconds; the motion's own duration and any dwell are added to it per MOVE."""
@@ -38,8 +40,9 @@ def _usage(param: str, exc: Exception) -> typer.BadParameter:
     return typer.BadParameter(str(exc), param_hint=param)
 
 
-@command("sim-robot", epilog="Example: hyst sim-robot --catheter ice-a --shape 'alpha=90,theta=0' "
-                             "--latency-ms 2   (then: hyst status --port /dev/pts/N)")
+@command("sim-robot", "Serve the virtual catheter as a robot on a pseudo-terminal",
+         epilog="Example: hyst sim-robot --catheter ice-a --shape 'alpha=90,theta=0' "
+                "--latency-ms 2   (then: hyst status --port /dev/pts/N)")
 def sim_robot_cmd(
     catheter: Annotated[str, typer.Option(
         help=f"Virtual catheter ({', '.join(CALIBRATED_NAMES)}): the calibrated one `hyst simulate` "
@@ -49,7 +52,10 @@ def sim_robot_cmd(
     effect: EffectOpt = None,
     seed: Annotated[int, typer.Option("--seed", min=0, help="Seed of every random draw (same seed, same bytes).")] = 0,
     latency_ms: Annotated[float, typer.Option(min=0.0, callback=finite, help="Answer latency per frame (ms).")] = 0.0,
-    knobs: Annotated[str, typer.Option(help="Knobs the robot drives, e.g. '1,2' or '1'.")] = "1,2",
+    knob: Annotated[Optional[List[str]], typer.Option(
+        "--knob", metavar="K", help="Knobs the robot drives: 1, 2 or 1,2 (repeatable; default 1,2).",
+        show_default=False)] = None,
+    knobs_alias: KnobsAliasOpt = None,
     travel_limit: Annotated[float, typer.Option(
         min=1.0, callback=finite, help="Largest |knob angle| accepted (deg); announced in the handshake.")] = 170.0,
     max_speed: Annotated[float, typer.Option(
@@ -79,12 +85,7 @@ def sim_robot_cmd(
     from ..emulator import Fault, serve
     from ..twin import LiveTwin
 
-    try:
-        knob_list = tuple(int(k) for k in knobs.split(","))
-    except ValueError:
-        raise typer.BadParameter(f"{knobs!r} is not a comma-separated list of knobs", param_hint="--knobs")
-    if not knob_list or any(k not in (1, 2) for k in knob_list) or len(set(knob_list)) != len(knob_list):
-        raise typer.BadParameter("knobs are 1 and/or 2, each once", param_hint="--knobs")
+    knob_list = parse_knobs(one_of(knob, knobs_alias, "--knob", "--knobs")) or (1, 2)
     if not name or len(name) > 32 or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
         raise typer.BadParameter("at most 32 printable characters without spaces, '*' or '='",
                                  param_hint="--name")
@@ -153,8 +154,9 @@ def _zoo_plant(text: str) -> Any:
     return plant
 
 
-@command("sweep", epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
-                         "--port /dev/ttyUSB0 -o sweep_knob1.csv && hyst identify sweep_knob1.csv -o model.json")
+@command("sweep", "Write the identification sweep as commands for `play`",
+         epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
+                "--port /dev/ttyUSB0 -o sweep_knob1.csv && hyst identify sweep_knob1.csv -o model.json")
 def sweep_cmd(
     output: OutOpt,
     knob: Annotated[int, typer.Option("--knob", min=1, max=2, help="Knob to sweep.")] = 1,
@@ -187,8 +189,9 @@ def _interrupted(exc: KeyboardInterrupt) -> None:
     fail(f"interrupted; {exc}" if str(exc) else "interrupted", 130)
 
 
-@command("play", epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
-                        "--port /dev/ttyUSB0 -o sweep_knob1.csv")
+@command("play", "Play knob commands on the robot and record the run",
+         epilog="Example: hyst sweep --knob 1 -o sweep_cmd.csv && hyst play sweep_cmd.csv "
+                "--port /dev/ttyUSB0 -o sweep_knob1.csv")
 def play_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Command trajectory CSV with t and q1/q2 "
                                                "(e.g. from `hyst compensate`).", show_default=False)],
@@ -199,10 +202,11 @@ def play_cmd(
                                        "is answered instead of at the file's timing.")] = False,
     timeout: TimeoutOpt = DEVICE_TIMEOUT,
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
-    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
     strict_speed: StrictSpeedOpt = False,
     no_return: NoReturnOpt = False,
+    columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Play the knob commands of TRAJECTORY on the robot and record t, q, c (and y) to a run CSV.
@@ -224,7 +228,7 @@ def play_cmd(
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():
         raise DataError(f"{output}: the folder {folder} does not exist")
-    run = io.read_run(trajectory, require=("t",))
+    run = load_run(trajectory, columns_mapping(columns), quiet=quiet)
     lim = limits(travel_limit, max_speed)
     with _open(port, baud, timeout) as device:
         info(f"connected to {device.info.name} ({device.info.catheter}, knobs "
@@ -276,12 +280,13 @@ def _fmt_tip(tip: float | None) -> str:
     return "-" if tip is None else f"{tip:+.3f}"
 
 
-@command("status", epilog="Example: hyst status --port /dev/ttyUSB0 --format json")
+@command("status", "Show the robot's handshake and each knob's state",
+         epilog="Example: hyst status --port /dev/ttyUSB0 --format json")
 def status_cmd(
     port: PortArg,
     baud: BaudOpt = 115200,
     timeout: TimeoutOpt = DEVICE_TIMEOUT,
-    fmt: FormatTJOpt = TableOrJson.table,
+    fmt: FormatOpt = OutputFormat.table,
 ) -> None:
     """Show who the robot is (handshake) and each knob's angle, motor current and tip angle.
 
@@ -294,8 +299,14 @@ def status_cmd(
         st = status(device)
     finally:
         device.close()  # not the context manager: it would send STOP, and status only reads
-    if fmt == TableOrJson.json:
+    if fmt == OutputFormat.json:
         echo_json(st.to_dict())
+        return
+    if fmt != OutputFormat.table:
+        from ..metrics import Table
+
+        echo_table(Table(("knob", "angle", "current", "tip"), ("knob", "angle (deg)", "current (mA)", "tip (deg)"),
+                         tuple((s.knob, s.angle, s.current, s.tip) for s in st.knobs)), fmt, digits=3)
         return
     i = st.info
     typer.echo(f"device {i.name} (protocol {i.protocol}), catheter {i.catheter}, knobs "
@@ -313,22 +324,30 @@ def status_cmd(
         typer.echo(f"{s.knob:>4}  {s.angle:>+11.3f}  {s.current:>12.2f}  {_fmt_tip(s.tip):>9}")
 
 
-def _render_moves(moves: dict, fmt: TableOrJson, quiet: bool) -> None:
-    if fmt == TableOrJson.json:
+def _render_moves(moves: dict, fmt: OutputFormat, quiet: bool) -> None:
+    if fmt == OutputFormat.json:
         echo_json({"knobs": {str(k): {"from": b.angle, "to": a.angle, "current": a.current, "tip": a.tip}
                              for k, (b, a) in moves.items()}})
+    elif fmt != OutputFormat.table:
+        from ..metrics import Table
+
+        echo_table(Table(("knob", "from", "to", "current", "tip"),
+                         ("knob", "from (deg)", "to (deg)", "current (mA)", "tip (deg)"),
+                         tuple((k, b.angle, a.angle, a.current, a.tip) for k, (b, a) in moves.items())), fmt, digits=3)
     elif not quiet:
         for k, (b, a) in moves.items():
             typer.echo(f"knob {k}: {b.angle:+.3f} -> {a.angle:+.3f} deg (current {a.current:.1f} mA, "
                        f"tip {_fmt_tip(a.tip)} deg)")
 
 
-@command("home", epilog="Example: hyst home --port /dev/ttyUSB0            (every knob to 0 deg)\n\n"
-                        "         hyst home --port /dev/ttyUSB0 --knob 2 --angle 10")
+@command("home", "Move the knobs back to 0 deg (or --angle)",
+         epilog="Example: hyst home --port /dev/ttyUSB0            (every knob to 0 deg)\n\n"
+                "         hyst home --port /dev/ttyUSB0 --knob 2 --angle 10")
 def home_cmd(
     port: PortArg,
-    knob: Annotated[Optional[List[int]], typer.Option(
-        "--knob", min=1, max=9, help="Knob to move (repeatable; default: every knob of the robot).")] = None,
+    knob: Annotated[Optional[List[str]], typer.Option(
+        "--knob", metavar="K", help="Knob(s) to move: 1, 2 or 1,2 (repeatable; default: every knob of the "
+                                    "robot).", show_default=False)] = None,
     angle: Annotated[float, typer.Option(
         "--angle", callback=finite, help="Target angle, deg (0: the knobs' zero, the straight-shaft rest).")] = 0.0,
     speed: MoveSpeedOpt = DEFAULT_MOVE_SPEED,
@@ -336,7 +355,7 @@ def home_cmd(
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
     baud: BaudOpt = 115200,
     timeout: TimeoutOpt = DEVICE_TIMEOUT,
-    fmt: FormatTJOpt = TableOrJson.table,
+    fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Move the knobs back to 0 deg (or --angle), one after the other, at --speed.
@@ -346,10 +365,12 @@ def home_cmd(
     """
     from ..robot import Interrupted, home
 
+    knobs = parse_knobs(knob, most=MAX_KNOB)
     _check_speed(speed, max_speed, travel_limit, abs(angle))
     with _open(port, baud, timeout) as device:
         try:
-            moves = home(device, knob or None, angle, speed=speed, limits=limits(travel_limit, max_speed))
+            moves = home(device, list(knobs) if knobs else None, angle, speed=speed,
+                         limits=limits(travel_limit, max_speed))
         except Interrupted as exc:
             _interrupted(exc)
     _render_moves(moves, fmt, quiet)
@@ -361,10 +382,11 @@ JOG_MAX_STEP = 10.0
 catheters, so one jog from rest does not bend the tip far."""
 
 
-@command("jog", epilog="Example: hyst jog --port /dev/ttyUSB0 --knob 1 --by -2.5")
+@command("jog", "Move one knob by a small relative angle",
+         epilog="Example: hyst jog --port /dev/ttyUSB0 --knob 1 --by -2.5")
 def jog_cmd(
     port: PortArg,
-    knob: Annotated[int, typer.Option("--knob", min=1, max=9, help="Knob to move.", show_default=False)],
+    knob: Annotated[int, typer.Option("--knob", min=1, max=MAX_KNOB, help="Knob to move.", show_default=False)],
     by: Annotated[float, typer.Option(
         "--by", callback=finite, help="Relative angle, deg (signed).", show_default=False)],
     max_step: Annotated[float, typer.Option(
@@ -375,7 +397,7 @@ def jog_cmd(
     max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
     baud: BaudOpt = 115200,
     timeout: TimeoutOpt = DEVICE_TIMEOUT,
-    fmt: FormatTJOpt = TableOrJson.table,
+    fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Move one knob by a small relative angle from where it is.

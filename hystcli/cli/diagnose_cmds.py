@@ -8,12 +8,13 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from .app import (FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, command, distinct_inputs,
-                  distinct_outputs, echo_json, info, progress, usage_error)
+from .app import (ColumnsOpt, FormatOpt, ModelOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, columns_mapping, command,
+                  distinct_inputs, distinct_outputs, echo_json, info, load_run, only_formats, progress, usage_error)
 
 
-@command("diagnose", epilog="Example: hyst diagnose --model shifted.json run_none.csv run_only.csv run_shift.csv "
-                            "run_shift2.csv -o report.json --model-out augmented.json --plot diag.png")
+@command("diagnose", "Find the unmodelled effect behind the model's error",
+         epilog="Example: hyst diagnose --model shifted.json run_none.csv run_only.csv run_shift.csv "
+                "run_shift2.csv -o report.json --model-out augmented.json --plot diag.png")
 def diagnose_cmd(
     runs: Annotated[List[Path], typer.Argument(metavar="RUN.csv", help="Run CSVs with t, q<k> and measured "
                                                     "y<k> (at least 2, one catheter).", show_default=False)],
@@ -35,6 +36,7 @@ def diagnose_cmd(
                         "(and a coupling when it moves both knobs), so those candidates re-identify the loop "
                         "from it with the effect acting; with its motor current (c<k>) it also tells whether "
                         "a delay sits in the drive or after the tendons.")] = None,
+    columns: ColumnsOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,
@@ -47,11 +49,11 @@ def diagnose_cmd(
     and PTPE before and after.
     """
     from .. import io
+    from ..check import require_shape
     from ..diagnose import diagnose, diagnosis_figure
     from ..effects import EFFECTS
 
-    if fmt not in (OutputFormat.table, OutputFormat.json):
-        usage_error("diagnose writes table or json", "--format")
+    only_formats(fmt, "diagnose", OutputFormat.table, OutputFormat.json)
     distinct_outputs(**{"--output": output, "--model-out": model_out, "--plot": plot})
     distinct_inputs(runs)
     if holdout is not None and holdout.strip():
@@ -70,9 +72,10 @@ def diagnose_cmd(
         unknown = [c for c in cands if c not in EFFECTS]
         if unknown:
             usage_error(f"unknown effect {unknown[0]!r} (known: {', '.join(EFFECTS)})", "--candidates")
+    mapping = columns_mapping(columns)
     model = io.load_model(model_path)
-    loaded = [io.read_run(p, require=("t",)) for p in runs]
-    sweep_run = io.read_run(sweep, require=("t",)) if sweep is not None else None
+    loaded = [require_shape(load_run(p, mapping, quiet=quiet)) for p in runs]
+    sweep_run = require_shape(load_run(sweep, mapping, quiet=quiet)) if sweep is not None else None
     with progress(quiet) as update:
         diag = diagnose(model, loaded, holdout=holdout, candidates=cands, max_effects=max_effects,
                         bootstrap=bootstrap, seed=seed, progress=update, sweep=sweep_run)

@@ -20,8 +20,8 @@ import typer
 from .. import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
 from ..errors import DataError
 from ..io import all_or_none, check_not_input
-from .app import (FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, option_errors, reading, usage_error,
-                  warn)
+from .app import (FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, only_formats, option_errors, reading,
+                  usage_error, warn)
 
 
 class ZeroMode(str, Enum):
@@ -44,7 +44,7 @@ def _mapping(preset: Optional[str], mapping_file: Optional[Path], spec: Optional
         usage_error("give --preset or --mapping, not both", "--preset")
     if preset is None and mapping_file is None and spec is None:
         usage_error("say how to read the files: --preset NAME, --mapping FILE.json or "
-                    "--map t=1,q1=2:SCALE,...", "--map")
+                    "--map t=time_s,q1=knob_deg,...", "--map")
     with option_errors("--map"):
         extra = importer.parse_map_spec(spec) if spec is not None else ()
     if preset is not None:
@@ -69,7 +69,10 @@ def _mapping(preset: Optional[str], mapping_file: Optional[Path], spec: Optional
     # what the options combine to is checked as a whole (a time column, no target twice)
     with contextlib.nullcontext() if mapping_file is not None else option_errors("--map"):
         if base is None:
-            return importer.ImportMapping(columns=tuple(extra), meta_from_header=pats, name="--map", **changes)
+            # a mapping of your own: separator, header row and comment lines found from the file
+            auto = {"separator": importer.AUTO, "comment": importer.AUTO}
+            return importer.ImportMapping(columns=tuple(extra), meta_from_header=pats, name="--map",
+                                          **{**auto, **changes})
         m = base.with_columns(extra)
         return dataclasses.replace(m, meta_from_header=m.meta_from_header + pats, **changes)
 
@@ -101,12 +104,15 @@ def _render(rep: importer.ImportReport, meta: dict, out: Path) -> list[str]:
 
 
 @command(
-    "import",
+    "import", "Convert foreign logs into run CSVs by a column mapping",
     help=(
         "Convert foreign logs (delimited text, .gz read transparently) into run CSVs through a column "
         "mapping: a built-in --preset, a --mapping JSON file (docs/import.md), or --map "
-        "target=column[:scale[:offset]],... (columns count from 1; value = raw*scale + offset; "
-        "scales may be fractions such as 360/8192). --map entries add to or replace a preset's.\n\n"
+        "target=column[:scale|unit[:offset]],...: a column by its header name or its number "
+        "(from 1), then a unit (ms, us, min to s; rad, rev to deg; A, uA to mA) or a scale (value = "
+        "raw*scale + offset; scales may be fractions such as 360/8192). With --map alone the "
+        "separator (comma, tab, semicolon or whitespace), the header row and the # or % comment "
+        "lines are found from the file. --map entries add to or replace a preset's.\n\n"
         "Metadata comes from the preset, --meta-from-header KEY=REGEX (first group) or a REGEX with "
         "named groups, and --meta key=value (wins; {key} is replaced by header metadata).\n\n"
         "Conditioning: --zero none|first|mean (default none: offsets between runs of a session are "
@@ -117,6 +123,7 @@ def _render(rep: importer.ImportReport, meta: dict, out: Path) -> list[str]:
         "The current is written in mA, converted from the unit the log states (metadata "
         "current_unit: A, mA or uA; the mrdlab preset states A).\n\n"
         "Examples (from the repository root):\n\n"
+        "    hyst import my_log.tsv --map t=time_ms:ms,q1=knob:rad,y1=tip_deg,c1=I:A -o run.csv\n\n"
         "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --preset mrdlab -o run41.csv\n\n"
         "    hyst import tests/data/mrdlab/load_freq/41_first6000.TXT.gz --map t=1,q1=2:360/8192,y1=5:0.09,c1=4 "
         "--comment '%' --meta current_unit=A -o run.csv\n\n"
@@ -133,11 +140,14 @@ def import_(
     mapping_file: Annotated[Optional[Path], typer.Option(
         "--mapping", help="Mapping JSON file (docs/import.md).")] = None,
     spec: Annotated[Optional[str], typer.Option(
-        "--map", help="target=column[:scale[:offset]],... e.g. t=1:0.001,q1=2:360/8192,y1=5:0.09,c1=4")] = None,
+        "--map", help="target=column[:scale|unit[:offset]],... e.g. t=time_ms:ms,q1=knob_deg,c1=I:A or "
+                      "t=1:0.001,q1=2:360/8192,y1=5:0.09,c1=4")] = None,
     sep: Annotated[Optional[str], typer.Option(
-        "--sep", help="Field separator: a character, 'tab', or 'whitespace' (default ',').")] = None,
+        "--sep", help="Field separator: a character, 'tab', 'whitespace' or 'auto' (default: auto with --map "
+                      "alone, else the mapping's).")] = None,
     comment: Annotated[Optional[str], typer.Option(
-        "--comment", help="Comment prefix of header lines (default '#'; '' for none).")] = None,
+        "--comment", help="Comment prefix of header lines ('' for none; default: # or % with --map alone, "
+                          "else the mapping's).")] = None,
     skip: Annotated[Optional[int], typer.Option("--skip", min=0, help="Lines to skip at the top.")] = None,
     rate: Annotated[Optional[float], typer.Option(
         "--rate", help="Sample rate (Hz) when the log has no time column.")] = None,
@@ -163,8 +173,7 @@ def import_(
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
-    if fmt not in (OutputFormat.table, OutputFormat.json):
-        usage_error("import prints a table or json", "--format")
+    only_formats(fmt, "import", OutputFormat.table, OutputFormat.json)
     if rate is not None and not 0 < rate < math.inf:
         usage_error("must be a positive number of Hz", "--rate")
     if resample_hz is not None and not 0 < resample_hz < math.inf:

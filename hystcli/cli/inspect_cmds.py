@@ -11,7 +11,8 @@ from .app import FormatOpt, OutputFormat, PlotOpt, QuietOpt, command, echo_json,
 ModelArg = Annotated[Path, typer.Argument(metavar="MODEL.json", help="Model JSON file.", show_default=False)]
 
 
-@command("show", epilog="Example: hyst show shifted.json --plot envelopes.png")
+@command("show", "Show a model: parameters, uncertainties, provenance",
+         epilog="Example: hyst show shifted.json --plot envelopes.png")
 def show_cmd(
     model_path: ModelArg,
     plot: PlotOpt = None,
@@ -55,7 +56,11 @@ def show_cmd(
 
 def _heading(path: Path, model) -> str:  # noqa: ANN001 - model.Model
     meta = dict(model.meta)
-    bits = [f"{k} {meta[k]}" for k in ("catheter", "source", "created", "shift_source", "diagnosed_on") if k in meta]
+    # the model's own record only: `created` when whatever wrote the model stated it, and the
+    # source's modification time under its own name (never a file's time read here)
+    labels = {"catheter": "catheter", "source": "source", "source_modified": "source modified",
+              "created": "created", "shift_source": "shift source", "diagnosed_on": "diagnosed on"}
+    bits = [f"{label} {meta[k]}" for k, label in labels.items() if k in meta]
     geometry = ("" if model.geometry is None else
                 f"; geometry beta_catheter {model.geometry.beta_catheter_mm:g} mm, "
                 f"beta_knob {model.geometry.beta_knob_mm:g} mm")
@@ -63,7 +68,8 @@ def _heading(path: Path, model) -> str:  # noqa: ANN001 - model.Model
         + geometry + "\n"
 
 
-@command("diff", epilog="Example: hyst diff model.json shifted.json   (straight shaft against bent)")
+@command("diff", "Compare two models, parameter by parameter",
+         epilog="Example: hyst diff model.json shifted.json   (straight shaft against bent)")
 def diff_cmd(
     a: Annotated[Path, typer.Argument(metavar="A.json", help="First model.", show_default=False)],
     b: Annotated[Path, typer.Argument(metavar="B.json", help="Second model.", show_default=False)],

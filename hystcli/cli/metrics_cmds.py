@@ -11,8 +11,8 @@ from typing import Annotated, Optional
 import typer
 
 from .. import metrics  # numpy only: the grouping fields and plot formats name the options
-from .app import (FormatOpt, OutputFormat, PlotOpt, QuietOpt, command, distinct_inputs, distinct_outputs, info,
-                  option_errors, prints, usage_error, warn)
+from .app import (ColumnsOpt, FormatOpt, OutputFormat, PlotOpt, QuietOpt, columns_mapping, command, distinct_inputs,
+                  distinct_outputs, info, load_run, option_errors, prints, usage_error, warn)
 
 
 def _group_by(value: str) -> str:
@@ -22,7 +22,7 @@ def _group_by(value: str) -> str:
 
 
 @command(
-    "evaluate",
+    "evaluate", "PTPE and RMSE of runs, with improvement rates",
     help=(
         "PTPE and RMSE of y - r per run and knob, pooled over trials as (mean, std), with "
         "improvement rates against the controllers `none` and `comp` (the paper's Tables I and II).\n\n"
@@ -47,9 +47,11 @@ def evaluate(
     plot: PlotOpt = None,
     output: Annotated[Optional[Path], typer.Option(
         "--output", "-o", help="Write the result to this file (atomically) instead of stdout.")] = None,
+    columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
 ) -> None:
-    from ..io import all_or_none, check_not_input, read_run
+    from ..check import require_shape
+    from ..io import all_or_none, check_not_input
 
     if plot is not None:
         suffix = plot.suffix.lower().lstrip(".")
@@ -60,8 +62,9 @@ def evaluate(
         if target is not None:
             check_not_input(target, runs)
     distinct_inputs(runs)
+    mapping = columns_mapping(columns)
 
-    loaded = [read_run(p) for p in runs]
+    loaded = [require_shape(load_run(p, mapping, quiet=quiet)) for p in runs]
     evaluation = metrics.evaluate_runs(loaded, group_by=metrics.parse_group_by(group_by))
     text = metrics.render(evaluation, fmt.value, per_run=per_run)
     png = metrics.evaluation_figure(loaded, plot.suffix.lower().lstrip(".")) if plot is not None else None

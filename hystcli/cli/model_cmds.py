@@ -1,30 +1,24 @@
 """Commands over the model itself: ``identify``, ``compensate``, ``predict``, ``rotate-shift``."""
 from __future__ import annotations
 
-from enum import Enum
+import math
 from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
 
-from .app import (FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about, command,
-                  distinct_outputs, echo_json, echo_table, info, option_errors, prints, reading, usage_error, warn)
+from .app import (ColumnsOpt, CurrentSign, FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about,
+                  columns_mapping, command, distinct_outputs, echo_json, echo_table, info, load_run, one_of,
+                  option_errors, prints, usage_error, warn)
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
-from .robot_opts import (AllowFastOpt, FormatTJOpt, MaxAccelOpt, MaxSpeedOpt, StrictSpeedOpt, TableOrJson,
-                         TravelLimitOpt, limit_hint, limits, speed_mode)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, StrictSpeedOpt, TravelLimitOpt, limit_hint,
+                         limits, speed_mode)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
 
-class CurrentSign(str, Enum):
-    """How a drive reports its motor current (:data:`hystcli.settings.CURRENT_SIGNS`)."""
-
-    auto = "auto"
-    signed = "signed"
-    magnitude = "magnitude"
-
-
-@command("identify", epilog="Example: hyst identify sample_data/ice-a/sweep_knob1.csv -o model.json --plot fit.png")
+@command("identify", "Identify each knob's hysteresis model from a sweep",
+         epilog="Example: hyst identify sample_data/ice-a/sweep_knob1.csv -o model.json --plot fit.png")
 def identify_cmd(
     sweep: InputArg,
     output: Annotated[Optional[Path], typer.Option(
@@ -42,6 +36,7 @@ def identify_cmd(
         help="Tendon offset from the backbone (mm), stored as the model's geometry.")] = None,
     beta_knob_mm: Annotated[Optional[float], typer.Option(help="Knob pulley radius (mm).")] = None,
     plot: PlotOpt = None,
+    columns: ColumnsOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     seed: SeedOpt = 0,
     quiet: QuietOpt = False,
@@ -51,7 +46,8 @@ def identify_cmd(
     Reads q<k> and c<k> (and y<k> when present) of every knob in RUN.csv. With y: the loop that
     best predicts the tip, each parameter with its interval (one the sweep cannot fix is reported
     open, not refused); without: dead-zone edges and backlash where the motor current shows them,
-    omega given, heights by the documented assumption.
+    omega given, heights by the documented assumption. Prints the parameters; -o writes the model
+    that the other commands read.
     """
     from dataclasses import replace
 
@@ -71,12 +67,13 @@ def identify_cmd(
     if beta_catheter_mm is not None:
         with option_errors("--beta-catheter-mm / --beta-knob-mm"):
             geometry = Geometry(beta_catheter_mm, beta_knob_mm)
-    if output is not None:
-        io.check_not_input(output, [sweep])
+    mapping = columns_mapping(columns)
+    for target in (output, plot):
+        if target is not None:
+            io.check_not_input(target, [sweep])
     settings = Settings(level=level, current_sign=current_sign.value)
     with about(sweep):
-        with reading(sweep, quiet) as progress:
-            run = io.read_run(sweep, require=("t",), progress=progress)
+        run = load_run(sweep, mapping, quiet=quiet)
         # the fit's libraries (scipy, numba) load only once the file is known to be good: a bad
         # file's error line comes in the time the command line itself takes to start
         from ..identify import identify, plot_identification
@@ -109,8 +106,8 @@ def identify_cmd(
         typer.echo(result.summary())
     else:
         echo_table(_identify_table(result), fmt)
-    if output is not None:
-        info(f"wrote {output}" + (f" and {plot}" if plot is not None else ""), quiet)
+    written = [str(p) for p in (output, plot) if p is not None]
+    info(f"wrote {' and '.join(written)}" if written else "no model written: -o model.json keeps it", quiet)
 
 
 def _ident(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification -> KnobIdentification or None
@@ -139,8 +136,9 @@ def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -
                   "says nothing that way; current-only: omega and the heights are assumed",))
 
 
-@command("compensate", epilog="Example: hyst compensate sample_data/reference_periodic.csv --model "
-                              "shifted.json -o commands.csv")
+@command("compensate", "Turn desired tip angles into knob commands",
+         epilog="Example: hyst compensate sample_data/reference_periodic.csv --model "
+                "shifted.json -o commands.csv")
 def compensate_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Desired trajectory CSV with t and r1/r2.",
                                                show_default=False)],
@@ -149,11 +147,12 @@ def compensate_cmd(
     ignore_shift: Annotated[bool, typer.Option(
         "--ignore-shift", help="Use offset 0 on every knob: the paper's Compensation-Only.")] = False,
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
-    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     max_accel: MaxAccelOpt = None,
     allow_fast: AllowFastOpt = False,
     strict_speed: StrictSpeedOpt = False,
-    fmt: FormatTJOpt = TableOrJson.table,
+    columns: ColumnsOpt = None,
+    fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
     """Turn desired tip angles r1/r2 into knob commands q1/q2 through the inverse model.
@@ -162,18 +161,19 @@ def compensate_cmd(
     Where the tip must cross a flat part of the loop (the dead zone, the backlash at a reversal)
     the exact inverse jumps across it within one sample, faster than --max-speed: such a step is
     rate-limited (the knob crosses it at the limit and catches up with the exact inverse after
-    it) and a warning says how long the knob lags and how far the tip is off on the model
-    meanwhile. --allow-fast writes the exact inverse, jumps included; --strict-speed refuses
-    (writes nothing, exit 1). Commands beyond --travel-limit are always refused. Reports each
-    knob's range, peak speed and peak acceleration of what it writes.
+    it) and a warning says how long the knob lags and how far that moves the tip on the model.
+    --allow-fast writes the exact inverse, jumps included; --strict-speed refuses (writes
+    nothing, exit 1). Commands beyond --travel-limit are always refused. Reports each knob's
+    range, peak speed and peak acceleration of what it writes.
     """
     from .. import compensation, io
     from ..safety import LimitExceeded
 
     mode = speed_mode(allow_fast, strict_speed)
     io.check_not_input(output, [trajectory, model_path])
+    mapping = columns_mapping(columns)
     model = io.load_model(model_path)
-    traj = io.read_run(trajectory)
+    traj = load_run(trajectory, mapping, quiet=quiet)
     # checked before anything is written: a refused file never exists
     try:
         result = compensation.compensate(model, traj, ignore_shift=ignore_shift, speed=mode, name=str(output),
@@ -188,12 +188,14 @@ def compensate_cmd(
     io.write_run(output, result.run, inputs=[trajectory, model_path])
     info(f"wrote {output} (controller {result.run.meta['controller']}, offsets "
          + ", ".join(f"knob {k}: {o:+.2f} deg" for k, o in result.offsets.items()) + ")", quiet)
-    if fmt == TableOrJson.json:
+    if fmt == OutputFormat.json:
         echo_json({"output": str(output), "controller": result.run.meta["controller"],
                    "offsets": {str(k): o for k, o in result.offsets.items()},
                    "warnings": list(result.warnings), "speed": mode,
                    "rate_limited": {str(k): c.to_dict() for k, c in result.catch_ups.items()},
                    **check.to_dict()})
+    elif fmt != OutputFormat.table:
+        echo_table(_motion_table(check, result.offsets), fmt)
     elif not quiet:
         typer.echo(f"{'knob':>4}  {'offset':>7}  {'q min':>7}  {'q max':>7}  {'peak speed':>10}  "
                    f"{'at t':>7}  {'peak accel':>11}  {'at t':>7}")
@@ -209,12 +211,25 @@ def compensate_cmd(
                       "; within them after rate-limiting)" if result.catch_ups else "; within them)"))
 
 
-@command("predict", epilog="Example: hyst predict run_shift.csv --model shifted.json -o pred.csv")
+def _motion_table(check, offsets):  # noqa: ANN001, ANN202 - safety.MotionCheck, {knob: offset} -> metrics.Table
+    """compensate's report for ``--format`` csv/markdown/latex."""
+    from ..metrics import Table
+
+    rows = tuple((k, offsets[k], m.q_min, m.q_max, m.peak_speed, m.peak_speed_t, m.peak_accel, m.peak_accel_t)
+                 for k, m in check.knobs.items())
+    return Table(("knob", "offset", "q_min", "q_max", "peak_speed", "peak_speed_t", "peak_accel", "peak_accel_t"),
+                 ("knob", "offset", "q min", "q max", "peak speed", "at t", "peak accel", "at t"), rows,
+                 ("deg, deg/s, deg/s^2, s",))
+
+
+@command("predict", "Run the model on a run's knob commands: the tip",
+         epilog="Example: hyst predict run_shift.csv --model shifted.json -o pred.csv")
 def predict_cmd(
     run_path: Annotated[Path, typer.Argument(metavar="RUN.csv", help="Run CSV with t and q1/q2.",
                                              show_default=False)],
     model_path: ModelOpt,
     output: OutOpt,
+    columns: ColumnsOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
@@ -227,9 +242,10 @@ def predict_cmd(
     from .. import compensation, io
 
     io.check_not_input(output, [run_path, model_path])
+    mapping = columns_mapping(columns)
     model = io.load_model(model_path)
     with about(run_path):
-        run = io.read_run(run_path)
+        run = load_run(run_path, mapping, quiet=quiet)
         predicted = compensation.predict(model, run)
     io.write_run(output, predicted, inputs=[run_path, model_path])
     if prints(fmt, quiet):
@@ -254,11 +270,14 @@ def _prediction_table(predicted):  # noqa: ANN001, ANN202 - io.Run -> metrics.Ta
                  ("predicted tip angle y and its error against the measured y, deg; '-': no measurement",))
 
 
-@command("rotate-shift", epilog="Example: hyst rotate-shift --model shifted.json --degrees 30 -o rotated.json")
+@command("rotate-shift", "Update the offsets after a bulk rotation of the body",
+         epilog="Example: hyst rotate-shift shifted.json --degrees 30 -o rotated.json")
 def rotate_shift_cmd(
-    model_path: ModelOpt,
     degrees: Annotated[float, typer.Option("--degrees", help="Bulk rotation of the catheter body (deg).")],
     output: OutOpt,
+    model_arg: Annotated[Optional[Path], typer.Argument(
+        metavar="MODEL.json", help="Model JSON file (from `hyst detect-shift`).", show_default=False)] = None,
+    model_opt: Annotated[Optional[Path], typer.Option("--model", "-m", hidden=True)] = None,  # the old spelling
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
@@ -267,11 +286,13 @@ def rotate_shift_cmd(
     The vector (offset1, offset2) rotates by -degrees (docs/design.md section 3; the paper leaves
     this case out).
     """
-    import math
-
     from .. import io
     from ..metrics import Table
 
+    model_path = one_of(model_arg, model_opt, "MODEL.json", "--model")
+    if model_path is None:
+        usage_error("give the model file, e.g. hyst rotate-shift shifted.json --degrees 30 -o rotated.json",
+                    "MODEL.json")
     if not math.isfinite(degrees):
         usage_error(f"must be a finite number of degrees, got {degrees}", "--degrees")
     io.check_not_input(output, [model_path])

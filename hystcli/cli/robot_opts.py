@@ -1,8 +1,8 @@
 """Options shared by the commands that talk to a robot or write what it will play.
 
 ``play``, ``track``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate``
-declare their limits, what to do with a step beyond the speed limit, reply deadline and
-table/json output from here, so that one option means one thing
+declare their limits, what to do with a step beyond the speed limit and their reply deadline from
+here, so that one option means one thing
 (and has one default, with its reason) everywhere. Every number is checked when parsed: a
 non-finite or non-positive value is a usage error (exit 2), never a traceback or a silently
 ignored limit (``nan`` passes a plain ``min=`` bound).
@@ -10,7 +10,6 @@ ignored limit (``nan`` passes a plain ``min=`` bound).
 from __future__ import annotations
 
 import math
-from enum import Enum
 from typing import Annotated, Optional
 
 import typer
@@ -32,13 +31,6 @@ def finite(value: float | None) -> float | None:
     return value
 
 
-class TableOrJson(str, Enum):
-    table = "table"
-    json = "json"
-
-
-FormatTJOpt = Annotated[TableOrJson, typer.Option("--format", "-f", help="Output format on stdout.")]
-
 TimeoutOpt = Annotated[float, typer.Option(
     "--timeout", callback=positive,
     help="Deadline of each reply from the robot, s, beyond the motion's own duration and any "
@@ -50,11 +42,18 @@ TravelLimitOpt = Annotated[float, typer.Option(
          "limit gets its own.")]
 MaxSpeedOpt = Annotated[float, typer.Option(
     "--max-speed", callback=positive,
+    help="Largest knob speed, deg/s. The default is one knob turn a second: the paper's motions "
+         "need at most 40 and a geared knob motor does a few hundred. A robot that announces a "
+         "lower top speed gets its own.")]
+InverseMaxSpeedOpt = Annotated[float, typer.Option(
+    "--max-speed", callback=positive,
     help="Largest knob speed between samples, deg/s. The default is one knob turn a second: the "
          "paper's motions need at most 40 and a geared knob motor does a few hundred, while the "
          "inverse model's jump across the dead zone or the backlash asks for up to ~40 deg within "
-         "one sample (3942 deg/s at 100 Hz). A robot that announces a lower top speed gets its "
-         "own.")]
+         "one sample (3942 deg/s at 100 Hz): such a step is crossed at this speed. A robot that "
+         "announces a lower top speed gets its own.")]
+"""``--max-speed`` of the commands that play the inverse model's commands (compensate, track, play),
+whose help says what becomes of a faster step."""
 MaxAccelOpt = Annotated[Optional[float], typer.Option(
     "--max-accel", callback=positive,
     help="Largest knob acceleration, deg/s^2 (default: reported, not limited).")]

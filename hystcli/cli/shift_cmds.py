@@ -1,4 +1,4 @@
-"""`hyst detect-shift`: Algorithm 1 on a recorded replay (``--replay``) or a live robot (``--port``).
+"""`hyst detect-shift`: Algorithm 1 on a recorded replay (``REPLAY.csv``) or a live robot (``--port``).
 
 Parses the options, opens one probe per knob (a :class:`hystcli.shift.ReplayProbe` over the
 replay, or a ``hystcli.device.DeviceProbe`` per knob on one connection to the serial port), calls
@@ -15,11 +15,13 @@ from typing import Annotated, Any, Iterator, Optional
 import typer
 
 from .. import device
+from .. import shift as shift_mod
 from ..errors import DataError
-from ..io import all_or_none, check_not_input, dumps_model, file_sha256, load_model, read_run
+from ..io import all_or_none, check_not_input, dumps_model, file_sha256, load_model
 from ..model import Model
-from .app import (BaudOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
-                  command, echo_json, info)
+from .app import (BaudOpt, ColumnsOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
+                  columns_mapping, command, echo_json, echo_table, info, load_run, one_of, parse_knobs,
+                  usage_error)
 from .robot_opts import TimeoutOpt
 
 
@@ -27,11 +29,11 @@ from .robot_opts import TimeoutOpt
 def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
             baud: int, current_ceiling: float | None = None, speed: float | None = None,
             dwell: float = device.DEFAULT_DWELL, mean: float = device.DEFAULT_MEAN,
-            timeout: float = 1.0) -> Iterator[tuple[dict[int, Any], Any]]:
+            timeout: float = 1.0, columns: Any = None, quiet: bool = False) -> Iterator[tuple[dict[int, Any], Any]]:
     """Yield ``({knob: probe}, run or None)``; live probes share one connection, closed (motors
     stopped) on the way out."""
     if replay is not None:
-        run = read_run(replay)
+        run = load_run(replay, columns, quiet=quiet)
         if knobs is None:
             knobs = [k for k in model.knobs if f"q{k}" in run]
             if not knobs:
@@ -39,9 +41,7 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
                                 f"(no column {' or '.join(f'q{k}' for k in model.knobs)})")
         for k in knobs:
             model.knob(k)
-        from ..shift import ReplayProbe
-
-        yield {k: ReplayProbe(run, k) for k in knobs}, run
+        yield {k: shift_mod.ReplayProbe(run, k) for k in knobs}, run
         return
     knobs = list(model.knobs) if knobs is None else knobs
     for k in knobs:
@@ -55,29 +55,56 @@ def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: st
                                      dwell=dwell, mean=mean) for k in knobs}, None
 
 
-def _table(results: dict[int, Any], output: Path) -> str:
+def _notes(r: shift_mod.ShiftResult) -> list[str]:
+    """What the search did beyond the plain walk to an edge, in words."""
+    notes = []
+    if r.start_outside:
+        notes.append("started with the tendon ahead taut: turned and crossed the dead zone")
+    if r.contacts:
+        notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
+    if r.reference == "model":
+        notes.append("offset from the model's edge (the model keeps no reading of the current)")
+    return notes
+
+
+_NOTE = ("deg; offset = where the current takes the tendon up now minus where the straight-shaft sweep's "
+         "current did; its 95 % interval beside it; shifted model written to {output}")
+
+
+def _text(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
+    """The offsets found as aligned text, each knob's notes below the table."""
+    import textwrap
+
+    from ..metrics import TEXT_WIDTH
+
     head = (f"{'knob':>4}  {'offset':>8}  {'interval':>17}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  "
-            f"{'travel':>7}  {'steps':>5}  notes")
+            f"{'travel':>7}  {'steps':>5}")
     lines = [head, "-" * len(head)]
+    notes = []
     for k, r in results.items():
-        notes = []
-        if r.start_outside:
-            notes.append("started with the tendon ahead taut: turned and crossed the dead zone")
-        if r.contacts:
-            notes.append("contact at " + ", ".join(f"{c:.1f}" for c in r.contacts) + " deg, reversed")
-        if r.reference == "model":
-            notes.append("offset from the model's edge (the model keeps no reading of the current)")
         edge = f"{r.edge} {r.edge_found_at:+.2f}"
         interval = f"[{r.offset_lo:+.2f}, {r.offset_hi:+.2f}]"
         lines.append(f"{k:>4}  {r.offset:>+8.2f}  {interval:>17}  {r.d_neg:>+8.2f}  {r.d_pos:>+8.2f}  {edge:>11}  "
-                     f"{r.travel:>7.1f}  {r.steps:>5}  {'; '.join(notes)}")
-    lines.append("(deg; offset = where the current takes the tendon up now minus where the straight-shaft sweep's "
-                 f"current did; its 95 % interval beside it; shifted model written to {output})")
-    return "\n".join(lines)
+                     f"{r.travel:>7.1f}  {r.steps:>5}")
+        notes += [f"knob {k}: {n}" for n in _notes(r)]
+    return "\n".join(lines + [""] + [w for n in notes + [_NOTE.format(output=output)]
+                                    for w in textwrap.wrap(n, TEXT_WIDTH, break_on_hyphens=False)])
+
+
+def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> Any:
+    """The offsets found as a :class:`hystcli.metrics.Table` (``--format`` csv/markdown/latex)."""
+    from ..metrics import Table
+
+    rows = tuple((k, r.offset, r.offset_lo, r.offset_hi, r.d_neg, r.d_pos, r.edge, r.edge_found_at, r.travel,
+                  r.steps, "; ".join(_notes(r))) for k, r in results.items())
+    return Table(("knob", "offset", "offset_lo", "offset_hi", "d_neg", "d_pos", "edge", "edge_at", "travel", "steps",
+                  "notes"),
+                 ("knob", "offset", "low", "high", "d~_neg", "d~_pos", "edge", "at", "travel", "steps", "notes"),
+                 rows, (_NOTE.format(output=output),))
 
 
 @command(
-    "detect-shift",
+    "detect-shift", "Detect each knob's shift after the shaft bends",
     help=(
         "Detect the hysteresis shift of each knob after the shaft took a new shape, by the "
         "motor current (Algorithm 1 of the paper), and write the shifted model.\n\n"
@@ -90,23 +117,26 @@ def _table(results: dict[int, Any], output: Path) -> str:
         "taut turns and crosses the dead zone; a slope beyond eps_upper is a contact: "
         "reverse. The search never exceeds --max-steps / --max-travel and returns the knob "
         "to where it began.\n\n"
-        "--replay walks a run recorded under the new shape (a slow sweep from the rest "
-        "position) as if the knob were stepped; --port runs it live on the robot.\n\n"
+        "A REPLAY.csv (a run recorded under the new shape: a slow sweep from the rest position) is "
+        "walked as if the knob were stepped; --port runs it live on the robot.\n\n"
         "Example:\n\n"
-        "    hyst detect-shift --model model.json --replay sample_data/ice-a/replay_alpha90_knob1.csv "
+        "    hyst detect-shift sample_data/ice-a/replay_alpha90_knob1.csv --model model.json "
         "-o shifted.json --plot fig5b.png"
     ),
 )
 def detect_shift_cmd(
     model_path: ModelOpt,
     output: OutOpt,
-    replay: Annotated[Optional[Path], typer.Option(
-        "--replay", help="Run CSV recorded under the new shape (columns t, q<k>, c<k>).")] = None,
+    replay_arg: Annotated[Optional[Path], typer.Argument(
+        metavar="REPLAY.csv", help="Run CSV recorded under the new shape (columns t, q<k>, c<k>); or --port.",
+        show_default=False)] = None,
+    replay_opt: Annotated[Optional[Path], typer.Option("--replay", hidden=True)] = None,  # the old spelling
     port: PortOpt = None,
     baud: BaudOpt = 115200,
     timeout: TimeoutOpt = 1.0,
-    knob: Annotated[Optional[int], typer.Option(
-        "--knob", min=1, max=2, help="Search this knob only (default: every knob of the model the source has).")] = None,
+    knob: Annotated[Optional[list[str]], typer.Option(
+        "--knob", metavar="K", help="Search these knobs only: 1, 2 or 1,2 (default: every knob of the model "
+                                    "the source has).", show_default=False)] = None,
     eps_upper: Annotated[Optional[float], typer.Option(
         "--eps-upper", help="Contact slope, mA/deg (default: four times the sweep's loaded slope).")] = None,
     false_alarm: Annotated[float, typer.Option(
@@ -132,13 +162,15 @@ def detect_shift_cmd(
                               "(0: one sample; a window longer than the hold also averages the "
                               "move). Used when the device offers the mean feature.")] = device.DEFAULT_MEAN,
     plot: PlotOpt = None,
+    columns: ColumnsOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
 ) -> None:
+    replay = one_of(replay_arg, replay_opt, "REPLAY.csv", "--replay")
     if (replay is None) == (port is None):
-        raise typer.BadParameter("give exactly one of --replay RUN.csv or --port PORT", param_hint="--replay / --port")
-    if fmt not in (OutputFormat.table, OutputFormat.json):
-        raise typer.BadParameter("detect-shift prints table or json", param_hint="--format")
+        usage_error("give exactly one of REPLAY.csv or --port PORT", "REPLAY.csv / --port")
+    if columns is not None and replay is None:
+        usage_error("--columns reads a REPLAY.csv; a live search (--port) reads no file", "--columns")
     for name, v in (("--step", step), ("--max-travel", max_travel), ("--current-ceiling", current_ceiling),
                     ("--speed", speed)):
         if v is not None and not (math.isfinite(v) and v > 0):
@@ -164,18 +196,17 @@ def detect_shift_cmd(
         if not folder.is_dir():
             raise DataError(f"{target}: the folder {folder} does not exist")
 
+    mapping = columns_mapping(columns)
+    knob_sel = parse_knobs(knob)
     model = load_model(model_path)
-    knobs = None if knob is None else [knob]
-    # here, not at the top: the search loads numba, which `hyst --help` and a bad input's error
-    # line must not wait for
-    from .. import shift as shift_mod
+    knobs = None if knob_sel is None else list(knob_sel)
     from ..settings import Settings
 
     options = dict(eps_upper=eps_upper, settings=Settings(false_alarm=false_alarm), step=step, max_steps=max_steps,
                    max_travel=max_travel)
-    results: dict[int, Any] = {}
+    results: dict[int, shift_mod.ShiftResult] = {}
     with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window,
-                 timeout) as (probes, run):
+                 timeout, mapping, quiet) as (probes, run):
         for k, probe in probes.items():
             progress = None
             if port is not None and not quiet:
@@ -205,5 +236,7 @@ def detect_shift_cmd(
     if fmt == OutputFormat.json:
         echo_json({"knobs": {str(k): r.to_dict() for k, r in results.items()},
                    "output": str(output), "plot": None if plot is None else str(plot)})
+    elif fmt != OutputFormat.table:
+        echo_table(_table(results, output), fmt)
     elif not quiet:
-        typer.echo(_table(results, output))
+        typer.echo(_text(results, output))

@@ -16,8 +16,9 @@ import typer
 
 from ..errors import DataError
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
-from .app import BaudOpt, ModelOpt, OutOpt, QuietOpt, command, fail, info, stderr_is_tty, warn
-from .robot_opts import (AllowFastOpt, NoReturnOpt, StrictSpeedOpt, TimeoutOpt, TravelLimitOpt, MaxSpeedOpt,
+from .app import (BaudOpt, ColumnsOpt, ModelOpt, OutOpt, QuietOpt, columns_mapping, command, fail, info, load_run,
+                  stderr_is_tty, warn)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, StrictSpeedOpt, TimeoutOpt, TravelLimitOpt,
                          limit_hint, limits, speed_mode)
 
 
@@ -26,7 +27,8 @@ class LatencyMode(str, Enum):
     ignore = "ignore"
 
 
-@command("track", epilog="Example: hyst track sample_data/reference_periodic.csv --port /dev/ttyUSB0 "
+@command("track", "Compensate a reference live and play it on the robot",
+         epilog="Example: hyst track sample_data/reference_periodic.csv --port /dev/ttyUSB0 "
                          "--model shifted.json -o run.csv\n\n"
                          "         my_planner | hyst track - --port /dev/ttyUSB0 --model shifted.json "
                          "-o run.csv --detect-shift-first")
@@ -50,10 +52,11 @@ def track_cmd(
     fast: Annotated[bool, typer.Option("--fast", help="Send each command as soon as the previous one "
                                        "is answered instead of at the reference's timing.")] = False,
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
-    max_speed: MaxSpeedOpt = DEFAULT_MAX_SPEED,
+    max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
     strict_speed: StrictSpeedOpt = False,
     no_return: NoReturnOpt = False,
+    columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Compensate REFERENCE live through the model and play each command on the robot as it comes.
@@ -83,11 +86,14 @@ def track_cmd(
         raise DataError(f"{output}: the folder {folder} does not exist")
     if baud <= 0:
         raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
+    if columns is not None and reference == "-":
+        raise typer.BadParameter("--columns reads a REFERENCE.csv file, not stdin", param_hint="--columns")
+    mapping = columns_mapping(columns)
     model = io.load_model(model_path)
     if reference == "-":
         ref = reference_from_lines(sys.stdin, "<stdin>")
     else:
-        ref = reference_from_run(io.read_run(reference, require=("t",)))
+        ref = reference_from_run(load_run(Path(reference), mapping, quiet=quiet))
     lim = limits(travel_limit, max_speed)
     tty = not quiet and stderr_is_tty()
 

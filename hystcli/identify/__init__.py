@@ -346,7 +346,8 @@ def _identification(reading: CurrentReading | None, chk: SweepCheck, estimates: 
                   no_load_rising=reading.no_load.get(1), no_load_falling=reading.no_load.get(-1),
                   slope_dead_zone=float(reading.dead_slope), slope_loaded_pos=reading.loaded_slope.get("pos"),
                   slope_loaded_neg=reading.loaded_slope.get("neg"), edge_level_pos=reading.edge_level.get("pos"),
-                  edge_level_neg=reading.edge_level.get("neg"), current_noise=float(reading.noise))
+                  edge_level_neg=reading.edge_level.get("neg"), current_noise=float(reading.noise),
+                  current_min=reading.current_range[0], current_max=reading.current_range[1])
         if reading.ripple is not None:
             kw.update(cogging_period=reading.ripple.period, cogging_sin=reading.ripple.sin,
                       cogging_cos=reading.ripple.cos)

@@ -162,11 +162,19 @@ def _judged(name: str, e: Estimate, max_halfwidth: float, span: float) -> Estima
     if e.halfwidth * scale <= max_halfwidth:
         return e
     unit = "" if name == "omega" else " deg"
-    return replace(e, fixed=False, reason=f"the record bounds it only to [{e.lo:.2f}, {e.hi:.2f}]{unit}: "
-                                          + HINTS[name].split(":")[0])
+    return replace(e, fixed=False, reason=f"the record bounds it only to [{e.lo:.2f}, {e.hi:.2f}]{unit}")
+
+
+class _Better(Exception):
+    """A profile refit found a better optimum than the fit it walks from."""
+
+    def __init__(self, fit: LoopFit) -> None:
+        super().__init__("a better optimum")
+        self.fit = fit
 
 
 def _walk_all(best: LoopFit, q, y, f_scale, noise, tau, chi2, level, restart=True):  # noqa: ANN001, ANN202
+    """Every parameter's interval: (estimates, None), or (partial, a better fit) to restart from."""
     values = _params(best.theta)
     se = _wald_se(best, q, y, noise, tau)
     span = float(np.ptp(q)) or 1.0
@@ -176,15 +184,13 @@ def _walk_all(best: LoopFit, q, y, f_scale, noise, tau, chi2, level, restart=Tru
         lo_lim, hi_lim, lo_dom, hi_dom = _limits(name, v0, q, y, float(values[4]))
         step0 = float(se[j]) * math.sqrt(chi2) if math.isfinite(se[j]) and se[j] > 0 else 0.05 * span
         step0 = min(max(step0, 1e-3 * (span if name != "omega" else 1.0)), 0.25 * span)
-        ends = []
-        for sign in (-1.0, 1.0):
-            limit, at_domain = (lo_lim, lo_dom) if sign < 0 else (hi_lim, hi_dom)
-            end, better = _walk(best, q, y, f_scale, noise, tau, chi2, j, v0, sign, step0, limit, at_domain,
-                                restart)
-            if better is not None:
-                return out, better
-            ends.append(end)
-        lo, hi = min(ends[0], v0), max(ends[1], v0)
+        walk = _Profile(best, q, y, f_scale, noise, tau, chi2, j, v0, restart)
+        try:
+            lo = walk.end(-1.0, step0, lo_lim, lo_dom)
+            hi = walk.end(1.0, step0, hi_lim, hi_dom)
+        except _Better as better:
+            return out, better.fit
+        lo, hi = min(lo, v0), max(hi, v0)
         closed = math.isfinite(lo) and math.isfinite(hi)
         out[name] = Estimate(v0, lo, hi, level, closed, None if closed else HINTS[name])
     return out, None
@@ -202,69 +208,68 @@ def _penalty(j: int, v: float, weight: float):  # noqa: ANN202
     return extra, extra_jac
 
 
-def _walk(best: LoopFit, q, y, f_scale, noise, tau, chi2, j, v0, sign, step0, limit, at_domain,  # noqa: ANN001
-          restart=True):  # noqa: ANN202
-    """One side of one parameter's profile: (end of the interval, or a better fit found)."""
-    weight = 1e3 * math.sqrt(q.size) * f_scale
-    start = best.p
-    inside, step = v0, step0
+class _Profile:
+    """One parameter's profile deviance, walked out from the fit on either side."""
 
-    def rise(v: float):  # noqa: ANN202
-        nonlocal start
-        got = refine_clipped(start, q, y, best.sides, f_scale, noise, penalty=_penalty(j, v, weight),
-                             max_nfev=40)
-        r = _clip_residuals(got.p, q, y, got.sides)
-        dev = float(np.sum(2.0 * (np.sqrt(1.0 + (r / f_scale) ** 2) - 1.0))) * f_scale ** 2 / noise ** 2
-        start = got.p
-        return (dev - best.deviance) / max(tau, 1.0), LoopFit(got.p, got.sides, dev)
+    def __init__(self, best: LoopFit, q, y, f_scale, noise, tau, chi2, j, v0, restart) -> None:  # noqa: ANN001
+        self.best, self.q, self.y = best, q, y
+        self.f_scale, self.noise, self.tau, self.chi2 = f_scale, noise, max(tau, 1.0), chi2
+        self.j, self.v0, self.restart = j, v0, restart
+        self.weight = 1e3 * math.sqrt(q.size) * f_scale
 
-    outside = None
-    first = True
-    while True:
-        v = v0 + sign * step
-        hit = sign * (v - limit) >= 0
-        if hit:
-            v = limit
-        d, got = rise(v)
-        if d < -0.5 and restart:
-            return None, got           # a better optimum than the fit: restart from it
-        if first and abs(d - chi2) < 0.2 * chi2 and not hit:
-            return v, None
-        if first and 0.25 * chi2 < d < 4.0 * chi2 and not hit:
-            # near-quadratic: try where the parabola through the fit and this point crosses
+    def rise(self, v: float, start: np.ndarray) -> tuple[float, np.ndarray]:
+        """The deviance rise (over tau) with the parameter held at ``v``, and the refit's unknowns."""
+        got = refine_clipped(start, self.q, self.y, self.best.sides, self.f_scale, self.noise,
+                             penalty=_penalty(self.j, v, self.weight), max_nfev=40)
+        r = _clip_residuals(got.p, self.q, self.y, got.sides)
+        dev = float(np.sum(2.0 * (np.sqrt(1.0 + (r / self.f_scale) ** 2) - 1.0))) * self.f_scale ** 2 / self.noise ** 2
+        d = (dev - self.best.deviance) / self.tau
+        if d < -0.5 and self.restart:
+            raise _Better(LoopFit(got.p, got.sides, dev))
+        return d, got.p
+
+    def end(self, sign: float, step: float, limit: float, at_domain: bool) -> float:
+        """Where the rise crosses chi2 on side ``sign`` (the domain's bound, or +-inf, where it never
+        does before ``limit``): a first probe, the quadratic guess it suggests, then doubling
+        steps, then bisection of the crossing."""
+        v0, chi2 = self.v0, self.chi2
+        start = self.best.p
+        hit = sign * (v0 + sign * step - limit) >= 0
+        v = limit if hit else v0 + sign * step
+        d, start = self.rise(v, start)
+        if not hit and abs(d - chi2) < 0.2 * chi2:
+            return v
+        inside, outside = v0, None
+        if not hit and 0.25 * chi2 < d < 4.0 * chi2:
             guess = v0 + sign * step * math.sqrt(chi2 / d)
-            dg, got = rise(guess)
-            if dg < -0.5 and restart:
-                return None, got
+            dg, start = self.rise(guess, start)
             if abs(dg - chi2) < 0.2 * chi2:
-                return guess, None
+                return guess
             pts = sorted([(v, d), (guess, dg)], key=lambda p: abs(p[0] - v0))
-            ins = [p[0] for p in pts if p[1] <= chi2]
-            outs = [p[0] for p in pts if p[1] > chi2]
-            if ins:
-                inside = ins[-1]
-            if outs:
-                outside = outs[0]
-                break
-            first = False
-            step = 2.0 * abs(inside - v0)
-            continue
-        first = False
-        if d > chi2:
+            inside = max([p[0] for p in pts if p[1] <= chi2] or [v0], key=lambda u: abs(u - v0))
+            outside = next((p[0] for p in pts if p[1] > chi2), None)
+        elif d > chi2:
             outside = v
-            break
-        inside = v
-        if hit:
-            return (limit if at_domain else sign * math.inf), None
-        step = 2.0 * abs(inside - v0) if inside != v0 else 2.0 * step
-    a, b = inside, outside
-    for _ in range(BISECTIONS):
-        m = 0.5 * (a + b)
-        d, got = rise(m)
-        if d < -0.5 and restart:
-            return None, got
-        if d > chi2:
-            b = m
         else:
-            a = m
-    return 0.5 * (a + b), None
+            inside = v
+        while outside is None:
+            if sign * (inside - limit) >= 0:
+                return limit if at_domain else sign * math.inf
+            v = v0 + sign * max(2.0 * abs(inside - v0), step)
+            v = limit if sign * (v - limit) >= 0 else v
+            d, start = self.rise(v, start)
+            if d > chi2:
+                outside = v
+            else:
+                inside = v
+        return self._bisect(inside, outside, start)
+
+    def _bisect(self, a: float, b: float, start: np.ndarray) -> float:
+        for _ in range(BISECTIONS):
+            m = 0.5 * (a + b)
+            d, start = self.rise(m, start)
+            if d > self.chi2:
+                b = m
+            else:
+                a = m
+        return 0.5 * (a + b)

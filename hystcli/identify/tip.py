@@ -53,7 +53,7 @@ from ..signal.stretches import decimation_index
 PARAMS = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg")
 """The seven parameters the tip fit identifies (the offset is 0 on a straight shaft)."""
 
-MAX_SAMPLES = 6000
+MAX_SAMPLES = 2500
 """Most samples the local fit evaluates; longer records are decimated (reversals kept)."""
 
 SEARCH_SAMPLES = 1200

@@ -16,20 +16,33 @@ from typing import Iterable, Mapping, Sequence
 
 import numpy as np
 
+import importlib
+from typing import Any
+
 from ..errors import ShiftDetectionError
-from ..io import atomic_write
-from ..model import KnobModel, Model
 from .probe import Probe, ProbeSample, ReplayExhausted, ReplayProbe, return_knob
 from .result import Evidence, ShiftResult
-from .search import (DEFAULT_MAX_TRAVEL, Reference, apply_shift, default_max_travel, detect_shift, detect_shifts,
-                     reference_of)
+
+# the search reads the current with the compiled broken-line fits: imported on first use, so that
+# the device layer (which needs only the probe's sample) and `hyst --help` do not load numba
+_LAZY = {name: "search" for name in ("DEFAULT_MAX_TRAVEL", "Reference", "apply_shift", "default_max_travel",
+                                     "detect_shift", "detect_shifts", "reference_of")}
+
+
+def __getattr__(name: str) -> Any:
+    module = _LAZY.get(name)
+    if module is None:
+        raise AttributeError(f"module 'hystcli.shift' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{module}", __name__), name)
+    globals()[name] = value
+    return value
 
 __all__ = ["DEFAULT_MAX_TRAVEL", "Evidence", "Probe", "ProbeSample", "Reference", "ReplayExhausted", "ReplayProbe",
            "ShiftResult", "apply_shift", "default_max_travel", "detect_shift", "detect_shifts", "plot_shift",
            "reference_of", "return_knob"]
 
 
-def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: Model | None = None,
+def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "Model | None" = None,
                background: Mapping[int, tuple[np.ndarray, np.ndarray]] | None = None,
                inputs: Iterable[str | os.PathLike] = ()) -> None:
     """Current against knob angle with the detected edges (the paper's Fig. 5b); PNG, atomic.
@@ -49,6 +62,7 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: M
     """
     from matplotlib.figure import Figure
 
+    from ..io import atomic_write
     from ..metrics import figure_bytes
 
     results = list(results)
@@ -66,7 +80,7 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: M
         ax.axvspan(r.d_neg, r.d_pos, color="tab:green", alpha=0.12,
                    label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
         if model is not None and r.knob in model.knobs:
-            km: KnobModel = model.knob(r.knob)
+            km = model.knob(r.knob)
             for d in (km.d_neg, km.d_pos):
                 ax.axvline(d, color="0.4", ls=":", lw=1)
         edge_c = float(np.interp(r.edge_found_at, *_sorted(tq, tc))) if tq.size else 0.0

@@ -109,6 +109,7 @@ class ReplayProbe:
         self.average = bool(average)
         self._q = np.asarray(run[qn], dtype=float)
         self._c = np.asarray(run[cn], dtype=float)
+        self._t = np.asarray(run["t"], dtype=float) if "t" in run else np.arange(self._q.size, dtype=float)
         self._y = np.asarray(run[yn], dtype=float) if yn in run else None
         dq = np.abs(np.diff(self._q))
         self._path = np.concatenate([[0.0], np.cumsum(dq)])
@@ -118,6 +119,7 @@ class ReplayProbe:
         self._unit = None    # the last step length, the averaging span
         self.start = self._pos
         self.reads_moving = True
+        self.detoured = False
         moves = np.flatnonzero(np.abs(self._q - self._q[0]) > 1e-9)
         # the way the record itself goes first: a search that starts that way need not walk the
         # record through its own turn
@@ -159,7 +161,11 @@ class ReplayProbe:
         c_end = self._c[j] + frac * (self._c[j + 1] - self._c[j])
         tip_end = None if self._y is None else float(self._y[j] + frac * (self._y[j + 1] - self._y[j]))
         unit = abs(target - self._pos)
+        before = self.recorded_travel
         self._i, self._frac, self._pos = j, float(frac), target
+        # the record went elsewhere and came back (its own turn) between the two positions: the
+        # state the knob reached here is not the one the last reading left
+        self.detoured = self.recorded_travel - before > 1.5 * unit + 1e-9
         if not self.average:
             return ProbeSample(target, float(c_end), tip_end)
         # the samples the knob passed during the last unit step of its monotone approach to q
@@ -202,6 +208,23 @@ class ReplayProbe:
         """Knob travel of the record walked so far (deg); more than the search's own travel
         when the search asked for a direction the record was not moving in."""
         return float(self._path[self._i] + self._frac * (self._path[self._i + 1] - self._path[self._i]))
+
+    @property
+    def reach(self) -> float:
+        """How far from where it starts the record takes the knob (deg): every angle it visits
+        was already driven, so a search over it risks nothing the record did not."""
+        return float(np.max(np.abs(self._q - self._q[0])))
+
+    @property
+    def mark(self) -> int:
+        """Where in the record the walk stands (for :meth:`samples_since`)."""
+        return self._i
+
+    def samples_since(self, mark: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The recorded samples ``(q, current, t)`` the walk has passed since ``mark``: a replay
+        holds every sample between the steps, which a search may read in full."""
+        j = self._i + 1
+        return self._q[mark:j].copy(), self._c[mark:j].copy(), self._t[mark:j].copy()
 
     def _sample_here(self) -> ProbeSample:
         i, f = self._i, self._frac

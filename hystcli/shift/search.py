@@ -54,8 +54,9 @@ DEFAULT_MAX_TRAVEL = 25.0
 MIN_READINGS = 5
 """Fewest readings since the last turn before the search reads them (a broken line needs them)."""
 
-MAX_REFINE = 16
-"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel)."""
+MAX_REFINE = 40
+"""Most readings taken past a declared edge to narrow its interval (a budget of knob travel: the
+contact slope and the travel limit stop it sooner)."""
 
 
 @dataclass(frozen=True)
@@ -71,6 +72,9 @@ class Reference:
     eps_upper: float | None
     ripple: Any = None
     at_rest_spread: float = 0.0
+    dead_slope: float = 0.0
+    noise: float = 0.0
+    current_range: tuple = (None, None)
 
 
 def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN202
@@ -85,7 +89,7 @@ def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN
         return Estimate(tip_edge, tip_edge, tip_edge), "model", ""
     ce = ident.current_edges.get(side)
     if ce is None or not ce.fixed:
-        why = "it did not show" if ce is None else "it left open"
+        why = "did not show" if ce is None else f"did not fix ({ce.reason})"
         return None, "current", (f"the identification sweep's current {why} where the {side} tendon is taken up, "
                                  f"so an offset from that side has no reference")
     tip_est = ident.estimates.get(name)
@@ -123,22 +127,27 @@ def reference_of(model: Model, knob: int, settings: Settings = DEFAULT, *,
         ripple = ident.ripple
     if eps_upper is None and slope > 0:
         eps_upper = settings.contact_factor * slope
+    dead = 0.0 if ident is None else float(ident.slope_dead_zone)
+    noise = 0.0 if ident is None or ident.current_noise is None else float(ident.current_noise)
+    crange = (None, None) if ident is None else (ident.current_min, ident.current_max)
     return Reference(sign=sign, edges=edges, kinds=kinds, why_not=why, edge_level=levels, slope_loaded=slope,
-                     eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread)
+                     dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread,
+                     current_range=crange)
 
 
 def default_max_travel(model: Model, knob: int) -> float:
     """The travel limit of a search when none is given (deg of knob).
 
-    The largest ``|q|`` of the identification sweep plus half the dead zone's width: a search that
-    starts with a tendon taut crosses the whole dead zone to the far edge, so in the tendons' own
-    terms it never drives the knob beyond what the sweep already did; :data:`DEFAULT_MAX_TRAVEL`
-    when the model has no identification.
+    Twice the largest ``|q|`` of the identification sweep plus half the dead zone's width: a bend
+    moves the edges by up to the knob's own reach, and a search that starts with a tendon taut
+    crosses the whole dead zone to the far edge (on a live robot the device's current ceiling and
+    the contact slope stop a search that loads a tendon too far); :data:`DEFAULT_MAX_TRAVEL` when
+    the model has no identification.
     """
     ident = model.identification.get(int(knob)) if model.identification else None
     if ident is None:
         return DEFAULT_MAX_TRAVEL
-    reach = max(abs(float(ident.q_min)), abs(float(ident.q_max)))
+    reach = 2.0 * max(abs(float(ident.q_min)), abs(float(ident.q_max)))
     km = model.knob(int(knob))
     reach += 0.5 * max(km.d_pos - km.d_neg, 0.0)
     return reach if math.isfinite(reach) and reach > 0 else DEFAULT_MAX_TRAVEL
@@ -190,9 +199,11 @@ class _Search:
     skipped: dict = field(default_factory=dict)
     turns: int = 0
     limits: int = 0
+    seg_mark: int | None = None
 
     def __post_init__(self) -> None:
         self.start = float(self.probe.position())
+        self.seg_mark = getattr(self.probe, "mark", None)
         self.z = NormalDist().inv_cdf(0.5 + 0.5 * self.settings.level)
         self.at_rest = not getattr(self.probe, "reads_moving", True)
 
@@ -226,18 +237,30 @@ class _Search:
             raise _Limit(str(exc)) from None
         self.steps += 1
         self.travel += self.step
+        if getattr(self.probe, "detoured", False):
+            # the record took its own turn to get here: the readings before belong to another
+            # pass of the knob, so the stretch starts afresh
+            self.seg_q, self.seg_c = [], []
+            self.seg_mark = max(getattr(self.probe, "mark", 1) - 1, 0)
         self._record(s)
 
     def _turn(self) -> None:
         self.direction = -self.direction
         self.turns += 1
         self.seg_q, self.seg_c = self.seg_q[-1:], self.seg_c[-1:]
+        self.seg_mark = getattr(self.probe, "mark", None)
 
     # -- level tests ------------------------------------------------------------------------
     def _band(self, noise: float) -> float:
-        """How far from the sweep's take-up level a take-up may read (mA)."""
+        """How far from the sweep's take-up level a take-up may read (mA).
+
+        A bend moves the take-up along the knob, not the current it happens at: the readings'
+        noise and the sweep's (at the settings' level), the dead zone's own tilt over the widest
+        gap allowed between two readings of one edge, and, for readings taken at rest, the span of
+        the motor's static friction between the two directions' levels."""
         spread = self.ref.at_rest_spread if self.at_rest else 0.0
-        return self.z * noise + self.ref.slope_loaded * self.settings.max_edge_gap + spread
+        return (self.z * math.hypot(noise, self.ref.noise) + abs(self.ref.dead_slope) * self.settings.max_edge_gap
+                + spread)
 
     def _load(self, c: float, d: int) -> float:
         return orientation(self.ref.sign, d) * c
@@ -351,8 +374,9 @@ class _Search:
 
     def _refine(self, edge: _Edge) -> _Edge:
         """More readings past the edge until its offset is known well enough or the search can go
-        no further (a contact, a limit, the budget)."""
-        best = edge
+        no further (a contact, a limit, the budget); each time the edge is placed again on every
+        sample the probe keeps (:meth:`_read_record`), or on the readings."""
+        best = self._read_record(edge)
         for _ in range(MAX_REFINE):
             if _offset_halfwidth(best, self.ref) <= self.settings.max_offset_halfwidth:
                 break
@@ -365,8 +389,38 @@ class _Search:
                 break
             got, _ = self._read_segment()
             if got is not None and got.direction == edge.direction:
-                best = got
+                best = self._read_record(got)
         return best
+
+    def _read_record(self, edge: _Edge) -> _Edge:
+        """The edge placed again on every sample the probe passed since the last turn, where the
+        probe keeps them (a replay holds the whole record between the steps): the same broken
+        line, read on all the samples instead of one median per step."""
+        if self.seg_mark is None or not hasattr(self.probe, "samples_since"):
+            return edge
+        from ..signal.reading import bin_stretch
+
+        q, c, t = self.probe.samples_since(self.seg_mark)
+        d = edge.direction
+        keep = d * np.diff(q, prepend=q[0]) >= 0
+        if keep.sum() < 3 * MIN_READINGS:
+            return edge
+        if self.ref.ripple is not None:
+            c = c - self.ref.ripple(q)
+        x, y, w, _ = bin_stretch(d * q[keep], c[keep], t[keep], self.settings.filter_hz)
+        order = np.argsort(x, kind="stable")
+        x, y, w = x[order], y[order], w[order]
+        fit = fit_piecewise(x, y, w, max_pieces=min(self.settings.max_pieces, 4))
+        _, j, _ = _classify(fit, self.ref.sign, d, self.z)
+        if j is None or abs(d * fit.knots[j] - edge.at) > max(edge.hi - edge.lo, 2.0 * self.step):
+            return edge
+        lo, hi = knot_interval(fit, j, self.settings.chi2)
+        a, b = d * lo, d * hi
+        if not (math.isfinite(a) and math.isfinite(b)):
+            return edge
+        return _Edge(direction=d, at=d * fit.knots[j], lo=min(a, b), hi=max(a, b), statistic=edge.statistic,
+                     threshold=edge.threshold, level=edge.level, slope_before=edge.slope_before,
+                     slope_after=edge.slope_after, n_before=edge.n_before, n_after=edge.n_after, noise=edge.noise)
 
 
 def _threshold(false_alarm: float, n: int, max_steps: int, dof: int) -> float:
@@ -394,7 +448,7 @@ def _offset_interval(edge: _Edge, ref: Reference) -> tuple[float, float]:
 
 def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings = DEFAULT,
                  eps_upper: float | None = None, step: float = 0.5, max_steps: int | None = None,
-                 max_travel: float | None = None, direction: int = 1, return_home: bool = True,
+                 max_travel: float | None = None, direction: int | None = None, return_home: bool = True,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
     """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
@@ -412,9 +466,11 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     step : float
         Unit step :math:`u` (deg).
     max_steps, max_travel : optional
-        Step and travel limits (default: room to cross the dead zone and back; the sweep's reach).
-    direction : int
-        Initial direction (+1 as in the paper, or -1).
+        Step and travel limits (default: room to cross the dead zone and back; twice the sweep's
+        reach, or a replay's own reach where that is more).
+    direction : int, optional
+        Initial direction (+1 as in the paper, or -1); default the way a replay's record goes first
+        (a search the other way would walk the record through its own turn), else +1.
     return_home : bool
         Return the knob to where it began after a successful search too (a failed one always does).
     progress : callable, optional
@@ -428,29 +484,13 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         the knob first; its message says so.
     """
     k = int(knob)
-    km = model.knob(k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
-    max_travel = default_max_travel(model, k) if max_travel is None else float(max_travel)
-    _check_options(step, max_travel, max_steps, direction)
-    if not ref.edges:
-        raise ShiftDetectionError(f"knob {k}: no offset can be taken from either side: "
-                                  + "; ".join(ref.why_not[d] for d in (1, -1) if ref.why_not[d]))
-    if max_steps is None:
-        max_steps = 3 * int(math.ceil(max_travel / step - 1e-9)) + 2 * MIN_READINGS
-    if direction not in ref.edges:
-        direction = -direction
-    search = _Search(probe, ref, settings, float(step), int(max_steps), max_travel, int(direction), progress)
+    direction, max_travel, max_steps = _limits(model, k, probe, ref, step, max_travel, max_steps, direction)
+    search = _Search(probe, ref, settings, float(step), max_steps, max_travel, direction, progress)
     start = search.start
     try:
         edge = search.run()
-        off_lo, off_hi = _offset_interval(edge, ref)
-        offset = edge.at - ref.edges[edge.direction].value
-        if max(offset - off_lo, off_hi - offset) > settings.max_offset_halfwidth:
-            raise ShiftDetectionError(
-                f"knob {k}: the tendon is taken up at {edge.at:.2f} deg [{edge.lo:.2f}, {edge.hi:.2f}], giving an "
-                f"offset of {offset:+.2f} deg known only to [{off_lo:+.2f}, {off_hi:+.2f}] at "
-                f"{settings.level:.0%}, wider than +-{settings.max_offset_halfwidth:g} deg: the current does not "
-                "place the edge well enough to move the robot by it")
+        _check_width(k, edge, ref, settings)
     except BaseException as exc:
         _, note = return_knob(probe, start)
         if isinstance(exc, HystError):
@@ -464,16 +504,55 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         returned, note = return_knob(probe, start)
         if not returned:
             raise ShiftDetectionError(f"knob {k}: edge found at {edge.at:.2f} deg, but {note}")
+    return _result(k, model.knob(k), edge, ref, search, returned, float(step))
+
+
+def _limits(model: Model, k: int, probe: Any, ref: Reference, step: float, max_travel: float | None,
+            max_steps: int | None, direction: int | None) -> tuple[int, float, int]:
+    """The search's first direction, travel limit and step limit, checked."""
+    user_direction = direction is not None
+    if direction is None:
+        direction = int(getattr(probe, "first_direction", 1))
+    if max_travel is None:
+        # a replay's record was driven already: its own reach is no risk
+        max_travel = max(default_max_travel(model, k), float(getattr(probe, "reach", 0.0)))
+    max_travel = float(max_travel)
+    _check_options(step, max_travel, max_steps, direction)
+    if not ref.edges:
+        raise ShiftDetectionError(f"knob {k}: no offset can be taken from either side: "
+                                  + "; ".join(ref.why_not[d] for d in (1, -1) if ref.why_not[d]))
+    if max_steps is None:
+        max_steps = 3 * int(math.ceil(max_travel / step - 1e-9)) + 2 * MIN_READINGS
+    if direction not in ref.edges and not hasattr(probe, "first_direction") and not user_direction:
+        direction = -direction
+    return int(direction), max_travel, int(max_steps)
+
+
+def _check_width(k: int, edge: _Edge, ref: Reference, settings: Settings) -> None:
+    """Refuse an offset known less well than the settings allow (it would move the robot)."""
+    off_lo, off_hi = _offset_interval(edge, ref)
+    offset = edge.at - ref.edges[edge.direction].value
+    if max(offset - off_lo, off_hi - offset) > settings.max_offset_halfwidth:
+        raise ShiftDetectionError(
+            f"knob {k}: the tendon is taken up at {edge.at:.2f} deg [{edge.lo:.2f}, {edge.hi:.2f}], giving an "
+            f"offset of {offset:+.2f} deg known only to [{off_lo:+.2f}, {off_hi:+.2f}] at "
+            f"{settings.level:.0%}, wider than +-{settings.max_offset_halfwidth:g} deg: the current does not "
+            "place the edge well enough to move the robot by it")
+
+
+def _result(k: int, km: Any, edge: _Edge, ref: Reference, search: _Search, returned: bool, step: float) -> ShiftResult:
+    off_lo, off_hi = _offset_interval(edge, ref)
+    offset = edge.at - ref.edges[edge.direction].value
     d = edge.direction
     ev = Evidence(statistic=edge.statistic, threshold=edge.threshold, edge_lo=edge.lo, edge_hi=edge.hi,
                   level=edge.level, expected_level=ref.edge_level.get(d), slope_before=edge.slope_before,
                   slope_after=edge.slope_after, n_before=edge.n_before, n_after=edge.n_after, noise=edge.noise)
-    return ShiftResult(knob=k, offset=float(offset), offset_lo=float(off_lo), offset_hi=float(off_hi),
-                       d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
+    return ShiftResult(knob=k, offset=float(offset), offset_lo=float(off_lo),
+                       offset_hi=float(off_hi), d_pos=float(km.d_pos + offset), d_neg=float(km.d_neg + offset),
                        edge="pos" if d > 0 else "neg", edge_found_at=float(edge.at), direction=d,
-                       reference=ref.kinds[d], start=start, travel=float(search.travel), steps=search.steps,
+                       reference=ref.kinds[d], start=search.start, travel=float(search.travel), steps=search.steps,
                        contacts=tuple(search.contacts), start_outside=search.turned_taut, returned=returned,
-                       step=float(step), evidence=ev, trace=tuple(search.trace))
+                       step=step, evidence=ev, trace=tuple(search.trace))
 
 
 def _check_options(step: float, max_travel: float, max_steps: int | None, direction: int) -> None:

@@ -246,8 +246,27 @@ def fit_piecewise(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, *, 
     grid = inner[::max(1, inner.size // 100)]
     kmax = max(0, min(max_pieces - 1, n // max(min_size, 1) - 1))
     s0 = scale if scale is not None else max(robust_scale(np.diff(y) * sw[1:]) / math.sqrt(2.0), 1e-12)
-    fits: dict[int, tuple] = {}
     k_first = min(max(min_pieces, 1), kmax + 1) - 1
+    fits = _nested_fits(x, y, sw, z, x0, k_first, kmax, min_size, s0, grid)
+    coef, kn, u, _ = fits[max(fits)]
+    r = (_design(x, x0, kn, z) @ coef - y) * sw
+    s = scale if scale is not None else max(robust_scale(r), 1e-12)
+    tau = autocorrelation_time(r) if tau is None else float(tau)
+    best_fit = None
+    for coef, kn, u, dev in (fits[k] for k in sorted(fits)):
+        if s != s0:
+            coef, u, dev = _solve(x, y, sw, z, x0, kn, s, u)
+        pw = _make(x, y, sw, z, x0, coef, kn, u, dev, s, tau)
+        if best_fit is None or pw.bic < best_fit.bic:
+            best_fit = pw
+    return best_fit
+
+
+def _nested_fits(x, y, sw, z, x0, k_first, kmax, min_size, s0, grid) -> dict[int, tuple]:  # noqa: ANN001
+    """The best fit with each number of knobs from ``k_first`` to ``kmax``: the first from the
+    segmentation's candidates, each next one from the last plus a knot where it misses most (and,
+    for the richest, from the candidates too)."""
+    fits: dict[int, tuple] = {}
     proposed = _candidates(y, kmax, min_size) if k_first < kmax else []
     prev = None
     for k in range(k_first, kmax + 1):
@@ -260,26 +279,9 @@ def fit_piecewise(x: np.ndarray, y: np.ndarray, w: np.ndarray | None = None, *, 
             starts = [np.sort(np.append(prev[1], _worst_place(x, y, sw, z, x0, prev[1], prev[0])))]
             if k == kmax:
                 starts += [x[idx] for idx in proposed]
-        best = None
-        for st in starts:
-            got = _place(x, y, sw, z, x0, st, s0, grid)
-            if best is None or got[3] < best[3]:
-                best = got
-        fits[k] = best
-        prev = best
-    kr = max(fits)
-    coef, kn, u, _ = fits[kr]
-    r = (_design(x, x0, kn, z) @ coef - y) * sw
-    s = scale if scale is not None else max(robust_scale(r), 1e-12)
-    tau = autocorrelation_time(r) if tau is None else float(tau)
-    best_fit = None
-    for k, (coef, kn, u, dev) in sorted(fits.items()):
-        if s != s0:
-            coef, u, dev = _solve(x, y, sw, z, x0, kn, s, u)
-        pw = _make(x, y, sw, z, x0, coef, kn, u, dev, s, tau)
-        if best_fit is None or pw.bic < best_fit.bic:
-            best_fit = pw
-    return best_fit
+        prev = min((_place(x, y, sw, z, x0, st, s0, grid) for st in starts), key=lambda got: got[3])
+        fits[k] = prev
+    return fits
 
 
 def _make(x, y, sw, z, x0, coef, knots, u, dev, scale, tau) -> Piecewise:  # noqa: ANN001

@@ -80,9 +80,9 @@ class StretchReading:
         Its interval.
     after_loaded_reversal : bool
         The stretch begins at a reversal where the tendon behind was loaded (past its edge).
-    complete : bool
-        The stretch runs from one reversal to the next (not the record's first, whose start state
-        the record cannot tell, nor its last, cut short).
+    from_reversal : bool
+        The stretch begins at a reversal (not the record's first, whose start state the record
+        cannot tell).
     """
 
     start: int
@@ -98,7 +98,7 @@ class StretchReading:
     hold_lo: float = math.nan
     hold_hi: float = math.nan
     after_loaded_reversal: bool = False
-    complete: bool = False
+    from_reversal: bool = False
 
 
 @dataclass(frozen=True)
@@ -129,6 +129,9 @@ class CurrentReading:
         the take-up along the knob, not this level.
     noise : float
         Per-sample noise of the conditioned current about the broken lines.
+    current_range : tuple of float
+        The lowest and highest conditioned current of the record: the most the sweep loaded each
+        tendon.
     ripple : Ripple or None
         The cogging ripple taken out before the stretches were read.
     stretches : tuple of StretchReading
@@ -146,6 +149,7 @@ class CurrentReading:
     noise: float
     ripple: Ripple | None = None
     stretches: tuple[StretchReading, ...] = field(default=(), repr=False)
+    current_range: tuple[float, float] = (math.nan, math.nan)
 
     def orient(self, direction: int) -> int:
         """The factor that turns a current into load coordinates on a stretch going ``direction``."""
@@ -246,12 +250,12 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
     """(dead piece, edge knot, hold knot) of one stretch, read in load coordinates.
 
     Returns ``(dead, edge, hold)`` (the edge is the knot ending the dead piece; None where absent).
-    The dead zone is the last piece that every later piece climbs faster than (by ``z`` standard
-    errors of the difference, against the piece's own slope either way) and where the slope
-    bottoms out (the piece before it, if any, is steeper either way): past the take-up the tendon
-    ahead only loads further (a stiffening, a wall are steeper again, and not a bottom), whatever
-    the friction does as the knob slows for its reversal; a held load and its unloading, or a
-    magnitude's fall, come before it. The edge is the knot that
+    The dead zone is a piece that every later piece climbs faster than (by ``z`` standard errors of
+    the difference, against the piece's own slope either way): past the take-up the tendon ahead
+    only loads further, whatever the friction does as the knob slows for its reversal; a held
+    load and its unloading, or a magnitude's fall, come before it. Of such pieces the last, or an
+    earlier one where the slopes only rise between the two (a take-up, a stiffening, a wall: one
+    ascent). The edge is the knot that
     ends the dead piece. A held plateau is a piece before the dead one, as flat as it, that a
     significant rise (the unloading) ends.
     """
@@ -265,16 +269,22 @@ def _classify(fit: Piecewise, sign: str, direction: int, z: float) -> tuple[int 
     def steeper(j: int, i: int) -> bool:
         return bool(slopes[j] - slopes[i] > z * math.hypot(se[i], se[j]))
 
-    # pieces every later piece climbs significantly faster than (the tendon ahead loading); of
-    # them the last where the slope bottoms out: a wall or a stiffening past the take-up is
-    # steeper again, a held load and its unloading come before
-    def dead_zone_like(m: int) -> bool:
-        later = all(slopes[j] - abs(slopes[m]) > z * math.hypot(se[m], se[j]) for j in range(m + 1, k + 1))
-        bottom = m == 0 or abs(slopes[m - 1]) - abs(slopes[m]) > z * math.hypot(se[m - 1], se[m])
-        return later and bottom
+    # pieces every later piece climbs significantly faster than (the tendon ahead loading, against
+    # the piece's own slope either way); of them the last, taken back to an earlier one where the
+    # slopes only rise between the two (a take-up, then a stiffening or a wall: one ascent),
+    # not where they fall (a held load's unloading into the dead zone lies between)
+    def later_steeper(m: int) -> bool:
+        return all(slopes[j] - abs(slopes[m]) > z * math.hypot(se[m], se[j]) for j in range(m + 1, k + 1))
 
-    cands = [m for m in range(k) if dead_zone_like(m)]
+    def ascending(a: int, b: int) -> bool:
+        return all(slopes[i + 1] >= slopes[i] - z * math.hypot(se[i], se[i + 1]) for i in range(a, b))
+
+    cands = [m for m in range(k) if later_steeper(m)]
     dead = cands[-1] if cands else None
+    for m in reversed(cands[:-1]):
+        if not ascending(m, dead):
+            break
+        dead = m
     # the held plateau: a piece before the dead zone that a significant rise (the unloading) ends,
     # and whose slope lies nearer the dead zone's (or level, in a stretch that ends before its
     # take-up) than the unloading's: a held load, not a bend in the unloading
@@ -295,12 +305,24 @@ def _stretch_points(q, c, t, a, b, d, band_hz, ring_s):  # noqa: ANN001
     return bin_stretch(d * q[a:b + 1][keep], c[a:b + 1][keep], tt[keep], band_hz)
 
 
-def _knot_q(fit: Piecewise, j: int, d: int, chi2: float) -> tuple[float, float, float]:
-    """A knot in knob degrees with its interval."""
+def _knot_q(fit: Piecewise, j: int, d: int, chi2: float, blur: float = 0.0) -> tuple[float, float, float]:
+    """A knot in knob degrees with its interval, each side widened (in quadrature) by ``blur``."""
     lo, hi = knot_interval(fit, j, chi2)
     at = d * fit.knots[j]
-    a, b = d * lo, d * hi
-    return at, min(a, b), max(a, b)
+    a, b = sorted((d * lo, d * hi))
+    return at, at - math.hypot(at - a, blur), at + math.hypot(b - at, blur)
+
+
+def _blur(q: np.ndarray, t: np.ndarray, a: int, b: int, d: int, x_knot: float, band: float | None) -> float:
+    """How far (deg of knob) the low-pass the current was read through spreads a kink: the knob's
+    speed there times the filter's time constant ``1 / (2 pi band)``. No reading places a kink
+    more finely than the filter lets it show, however many samples lie around it."""
+    if not band or b - a < 2:
+        return 0.0
+    x = d * q[a:b + 1]
+    v = np.abs(np.gradient(q[a:b + 1], t[a:b + 1]))
+    order = np.argsort(x, kind="stable")
+    return float(np.interp(x_knot, x[order], v[order])) / (2.0 * math.pi * band)
 
 
 # --------------------------------------------------------------------------------------------
@@ -397,10 +419,9 @@ def read_current(q: np.ndarray, c: np.ndarray, t: np.ndarray, settings: Settings
     stretches = []
     for i, ((a, b, d), fit) in enumerate(zip(spans, fits)):
         dead, edge, hold = _classify(fit, sign, d, z)
-        kw: dict = dict(start=a, stop=b, direction=d, fit=fit, dead=dead, edge=None,
-                              complete=(0 < i < len(spans) - 1))
+        kw: dict = dict(start=a, stop=b, direction=d, fit=fit, dead=dead, edge=None, from_reversal=i > 0)
         if edge is not None:
-            at, lo, hi = _knot_q(fit, edge, d, chi2)
+            at, lo, hi = _knot_q(fit, edge, d, chi2, _blur(q, t, a, b, d, fit.knots[edge], settings.filter_hz))
             kw.update(edge=edge, edge_at=at, edge_lo=lo, edge_hi=hi)
         if hold is not None:
             x_start = d * q[a]
@@ -470,7 +491,7 @@ def _fit_stretches(q, c, t, spans, settings, band, ring_s) -> list[Piecewise]:  
 def _ripple(q, spans, fits, sign, z) -> Ripple | None:  # noqa: ANN001
     """The cogging ripple, read on the dead-zone pieces' residuals (where no tendon's load bends the
     current) pooled over the record, where BIC takes it (:func:`.condition.find_ripple`)."""
-    qs, rs, ws, taus = [], [], [], []
+    qs, rs, ws, taus, ds = [], [], [], [], []
     for (a, b, d), fit in zip(spans, fits):
         dead, _, _ = _classify(fit, sign, d, z)
         if dead is None:
@@ -487,12 +508,42 @@ def _ripple(q, spans, fits, sign, z) -> Ripple | None:  # noqa: ANN001
         rs.append(np.clip(r, -lim, lim))
         ws.append(sw[m] ** 2)
         taus.append(fit.tau)
+        ds.append(np.full(int(m.sum()), d))
     if not qs:
         return None
     step = float(np.median(np.abs(np.diff(q)))) if q.size > 1 else 0.01
-    return find_ripple(np.concatenate(qs), np.concatenate(rs), np.concatenate(ws),
-                       scale=float(np.median([f.scale for f in fits])), tau=float(np.median(taus)),
-                       shortest=max(8.0 * step, 0.3))
+    spacing = float(np.median(np.concatenate([np.abs(np.diff(x)) for x in qs if x.size > 1]) if qs else [0.0]))
+    # a wave shorter than four points' spacing is aliasing, not cogging
+    qa, ra, wa, da = np.concatenate(qs), np.concatenate(rs), np.concatenate(ws), np.concatenate(ds)
+    scale, tau = float(np.median([f.scale for f in fits])), float(np.median(taus))
+    ripple = find_ripple(qa, ra, wa, scale=scale, tau=tau, shortest=max(8.0 * step, 4.0 * spacing, 0.3))
+    if ripple is None or not _same_both_ways(ripple, qa, ra, wa, da, scale, tau, z):
+        return None
+    return ripple
+
+
+def _same_both_ways(ripple: Ripple, q, r, w, d, scale, tau, z) -> bool:  # noqa: ANN001
+    """Whether each direction of motion shows the ripple on its own, with amplitudes that agree: a
+    motor's cogging is set by its shaft's angle, not by the way it turns, where a wave fitted to a
+    misfit of the broken lines is not (a 2-dof chi-square test of the difference, and each
+    direction's amplitude beyond ``z`` standard errors)."""
+    k = 2.0 * math.pi / ripple.period
+    fits = []
+    for way in (1, -1):
+        m = d == way
+        if m.sum() < 10:
+            return False
+        a = np.column_stack([np.sin(k * q[m]), np.cos(k * q[m])]) * np.sqrt(w[m])[:, None]
+        coef, *_ = np.linalg.lstsq(a, r[m] * np.sqrt(w[m]), rcond=None)
+        cov = np.linalg.pinv(a.T @ a) * scale ** 2 * max(tau, 1.0)
+        fits.append((coef, cov))
+    (c1, v1), (c2, v2) = fits
+    for c, v in fits:
+        if float(c @ np.linalg.pinv(v) @ c) < z * z:
+            return False
+    diff = c1 - c2
+    level = math.erf(z / math.sqrt(2.0))             # the two-sided level z stands for
+    return float(diff @ np.linalg.pinv(v1 + v2) @ diff) <= -2.0 * math.log(1.0 - level)  # chi-square(2)
 
 
 def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> CurrentReading:  # noqa: ANN001
@@ -502,66 +553,98 @@ def _summarise(q, c, t, sign, sign_note, stretches, ripple, z, settings) -> Curr
     no_load: dict[int, float] = {}
     loaded_slope: dict[str, float] = {}
     edge_level: dict[str, float] = {}
-    dead_slopes = []
+    dead_slopes: list[float] = []
     for side, d in (("pos", 1), ("neg", -1)):
-        seen = _confirmed([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
-                          [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
-        # stretches from reversal to reversal: the record's first starts from a state it cannot
-        # tell, its last is cut short; they stand in only where no complete stretch shows the edge
-        mine = [s for s in seen if s.complete] or seen
-        if not mine:
+        mine = _take_up_stretches(stretches, d, sign, z, settings)
+        got = _side_edge(mine, side, d, sign, z, settings)
+        if got is None:
             notes[f"d_{side}"] = (f"no stretch of the record takes the {'positive' if d > 0 else 'negative'} "
                                   "tendon up from the dead zone (the current never steepens past a flat "
                                   "stretch that way): sweep further that way")
         else:
-            v, lo, hi, p = combine([s.edge_at for s in mine], [s.edge_lo for s in mine],
-                                   [s.edge_hi for s in mine], z, settings.level)
-            closed = math.isfinite(lo) and math.isfinite(hi)
-            reason = None
-            if not closed:
-                reason = "the current's take-up is seen too close to where the stretches end"
-            edges[side] = Estimate(v, lo, hi, settings.level, closed, reason)
-            if p < 1.0 - settings.level and len(mine) > 1:
-                notes[f"d_{side}"] = (f"the stretches place the take-up differently "
-                                      f"({', '.join(f'{s.edge_at:.2f}' for s in mine)} deg; heterogeneity "
-                                      f"p = {p:.2g}): the interval carries their spread")
-            slopes = [float(orientation(sign, d) * s.fit.slopes[s.edge + 1]) for s in mine]
-            loaded_slope[side] = float(np.median(slopes))
-            edge_level[side] = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted())
-                                                for s in mine]))
-        deads = [s for s in stretches if s.direction == d and s.dead is not None]
-        levels = []
-        for s in deads:
-            x_lo = s.fit.knots[s.dead - 1] if s.dead > 0 else s.fit.data[0][0]
-            x_hi = s.fit.knots[s.dead] if s.dead < s.fit.n_knots else s.fit.data[0][-1]
-            xb = s.fit.data[0]
-            levels.append(float(np.interp(0.5 * (x_lo + x_hi), xb, s.fit.fitted())))
-            dead_slopes.append(float(orientation(sign, d) * s.fit.slopes[s.dead]))
+            edges[side], loaded_slope[side], edge_level[side], note = got
+            if note:
+                notes[f"d_{side}"] = note
+        levels, slopes = _dead_levels([s for s in stretches if s.direction == d and s.dead is not None], sign)
+        dead_slopes += slopes
         if levels:
             no_load[d] = float(np.median(levels))
-        # backlash: shown after the reversal at this side's end, by the stretches going the other way
-        b_side = side
-        after = [s for s in stretches if s.direction == -d and s.after_loaded_reversal]
-        held = [s for s in after if math.isfinite(s.hold)]
-        name = f"b_{b_side}"
-        if held and len(held) == len(after):
-            v, lo, hi, _ = combine([s.hold for s in held], [s.hold_lo for s in held], [s.hold_hi for s in held],
-                                   z, settings.level)
-            lo = max(lo, 0.0)
-            backlash[b_side] = Estimate(max(v, 0.0), lo, hi, settings.level, math.isfinite(hi), None)
-        elif held:
-            notes[name] = (f"{len(held)} of the {len(after)} stretches after a loaded reversal show the load held, "
-                           "the others none: the current does not fix the backlash")
-        elif after:
-            notes[name] = ("after a reversal the current unloads at once (it follows the tendon's stretch, not "
-                           "the tip's load): it does not show the backlash")
+        est, note = _side_backlash([s for s in stretches if s.direction == -d and s.after_loaded_reversal],
+                                   z, settings)
+        if est is not None:
+            backlash[side] = est
         else:
-            notes[name] = "no reversal of the record comes back from a loaded tendon: the backlash is not shown"
+            notes[f"b_{side}"] = note
     noise = _noise(q, c, stretches)
     return CurrentReading(sign=sign, sign_note=sign_note, edges=edges, backlash=backlash, notes=notes,
                           no_load=no_load, dead_slope=float(np.median(dead_slopes)) if dead_slopes else 0.0,
                           loaded_slope=loaded_slope, edge_level=edge_level, noise=noise, ripple=ripple,
-                          stretches=tuple(stretches))
+                          stretches=tuple(stretches), current_range=(float(np.min(c)), float(np.max(c))))
+
+
+def _take_up_stretches(stretches, d, sign, z, settings) -> list[StretchReading]:  # noqa: ANN001
+    """The stretches of direction ``d`` whose take-up the edge is read from: at the no-load level,
+    over a dead piece the other direction finds slack too, and begun at a reversal (the record's
+    first stretch starts from a state the record cannot tell: a tip held above its plateau is
+    taken up early; it stands in only where no other shows the edge, and then fixes nothing)."""
+    seen = _confirmed(_at_no_load([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
+                                  sign, z, settings.max_edge_gap),
+                      [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
+    return [s for s in seen if s.from_reversal] or seen
+
+
+def _side_edge(mine, side, d, sign, z, settings):  # noqa: ANN001, ANN202
+    """(edge Estimate, loaded slope, current at the take-up, note or None), or None without one."""
+    if not mine:
+        return None
+    v, lo, hi, p = combine([s.edge_at for s in mine], [s.edge_lo for s in mine], [s.edge_hi for s in mine], z,
+                           settings.level)
+    closed = math.isfinite(lo) and math.isfinite(hi)
+    reason = None if closed else "the current's take-up is seen too close to where the stretches end"
+    disagree = p < 1.0 - settings.level and len(mine) > 1
+    if not mine[0].from_reversal:
+        closed, reason = False, ("only the record's first stretch shows the take-up, from a start state "
+                                 "the record cannot tell: sweep a whole cycle past that edge")
+    elif closed and max(v - lo, hi - v) > settings.max_fixed_halfwidth:
+        closed, reason = False, (f"the current places the take-up only to [{lo:.2f}, {hi:.2f}] deg "
+                                 + ("(its stretches disagree)" if disagree else ""))
+    note = (f"the stretches place the take-up differently ({', '.join(f'{s.edge_at:.2f}' for s in mine)} deg; "
+            f"heterogeneity p = {p:.2g}): the interval carries their spread") if disagree else None
+    slope = float(np.median([orientation(sign, d) * s.fit.slopes[s.edge + 1] for s in mine]))
+    level = float(np.median([np.interp(s.fit.knots[s.edge], s.fit.data[0], s.fit.fitted()) for s in mine]))
+    return Estimate(v, lo, hi, settings.level, closed, reason), slope, level, note
+
+
+def _dead_levels(deads, sign) -> tuple[list[float], list[float]]:  # noqa: ANN001
+    """The current at the middle of each dead piece, and each dead piece's slope (load coordinates)."""
+    levels, slopes = [], []
+    for s in deads:
+        x = s.fit.data[0]
+        x_lo = s.fit.knots[s.dead - 1] if s.dead > 0 else x[0]
+        x_hi = s.fit.knots[s.dead] if s.dead < s.fit.n_knots else x[-1]
+        levels.append(float(np.interp(0.5 * (x_lo + x_hi), x, s.fit.fitted())))
+        slopes.append(float(orientation(sign, s.direction) * s.fit.slopes[s.dead]))
+    return levels, slopes
+
+
+def _side_backlash(after, z, settings):  # noqa: ANN001, ANN202
+    """(Estimate, None) of the backlash the stretches after a loaded reversal show held, or
+    (None, why not)."""
+    held = [s for s in after if math.isfinite(s.hold)]
+    if not held:
+        if after:
+            return None, ("after a reversal the current unloads at once (it follows the tendon's stretch, not "
+                          "the tip's load): it does not show the backlash")
+        return None, "no reversal of the record comes back from a loaded tendon: the backlash is not shown"
+    if len(held) < len(after):
+        return None, (f"{len(held)} of the {len(after)} stretches after a loaded reversal show the load held, "
+                      "the others none: the current does not fix the backlash")
+    v, lo, hi, _ = combine([s.hold for s in held], [s.hold_lo for s in held], [s.hold_hi for s in held], z,
+                           settings.level)
+    lo, v = max(lo, 0.0), max(v, 0.0)
+    sharp = math.isfinite(hi) and max(v - lo, hi - v) <= settings.max_fixed_halfwidth
+    return Estimate(v, lo, hi, settings.level, sharp,
+                    None if sharp else f"the current places the held load's end only to [{lo:.2f}, {hi:.2f}] deg"), None
 
 
 def _dead_span(s: StretchReading) -> tuple[float, float]:
@@ -586,6 +669,30 @@ def _confirmed(mine: list[StretchReading], other: list[StretchReading]) -> list[
         return mine
     ok = [s for s in mine if any(min(_dead_span(s)[1], b) >= max(_dead_span(s)[0], a) for a, b in spans)]
     return ok or mine
+
+
+def _edge_load(s: StretchReading, sign: str) -> float:
+    """The current at a stretch's take-up knot, in load coordinates."""
+    x = s.fit.data[0]
+    return orientation(sign, s.direction) * float(np.interp(s.fit.knots[s.edge], x, s.fit.fitted()))
+
+
+def _at_no_load(mine: list[StretchReading], sign: str, z: float, gap: float) -> list[StretchReading]:
+    """The stretches whose take-up happens at the no-load level.
+
+    In load coordinates a tendon still held behind (a load held after a reversal) reads below the
+    dead zone's level for a signed current and above it for a magnitude; a take-up starts from the
+    dead zone. Of one direction's candidates the highest (signed) or lowest (magnitude) level is
+    the dead zone's, and a candidate farther from it than the readings' noise (at the level ``z``)
+    and the dead zone's tilt over ``gap`` deg is a held load's end, not a take-up."""
+    if len(mine) < 2:
+        return mine
+    levels = np.array([_edge_load(s, sign) for s in mine])
+    ref = float(levels.max() if sign == "signed" else levels.min())
+    noise = max(s.fit.scale / math.sqrt(max(float(np.median(s.fit.data[2] ** 2)), 1e-12)) for s in mine)
+    tilt = max(abs(float(s.fit.slopes[s.dead])) for s in mine) * gap
+    band = z * math.sqrt(2.0) * noise + tilt
+    return [s for s, lv in zip(mine, levels) if abs(lv - ref) <= band]
 
 
 def _noise(q, c, stretches) -> float:  # noqa: ANN001
