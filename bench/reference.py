@@ -8,7 +8,7 @@ Three estimators, each a least-squares fit with a 95 % profile-likelihood interv
 
 ``tip_reference(t, q, y)``
     The seven tip parameters (and the unknown initial tip state) through the clamp recursion
-    ``y_t = min(max(y_{t-1}, f_up(u_t)), f_dn(u_t))`` (DESIGN.md section 3; the envelopes are
+    ``y_t = min(max(y_{t-1}, f_up(u_t)), f_dn(u_t))`` (docs/design.md section 3; the envelopes are
     written here as medians of their three pieces), from a grid of starts over the swept range.
     A rigid wall that stops the tip on one side is an optional term, kept when BIC prefers it.
 ``current_reference(t, q, c)``

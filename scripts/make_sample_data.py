@@ -62,7 +62,7 @@ deg; the metadata holds the catheter, shape, effects and the twin's true offsets
   what `hyst identify` reads.
 - `<catheter>/replay_<scenario>_knob<k>.csv`: a slow sweep of knob k under a shaft shape
   (0 -> +{REPLAY_AMPLITUDE:g} -> -{REPLAY_AMPLITUDE:g} -> 0 deg at {REPLAY_SPEED:g} deg/s,
-  {REPLAY_FS:g} Hz, the other knob at rest): what `hyst detect-shift --replay` reads. Scenarios:
+  {REPLAY_FS:g} Hz, the other knob at rest): what `hyst detect-shift REPLAY.csv` reads. Scenarios:
 {scen}
 
 Values are rounded to a lab recorder's resolution (time 1 us, knob 1e-4 deg, tip 1e-3 deg,

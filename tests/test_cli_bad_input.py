@@ -231,7 +231,7 @@ def test_option_values_found_wrong_after_parsing_exit_2(tmp_path, args, fragment
 
 
 # -- options that were ignored -------------------------------------------------------------------
-@pytest.mark.parametrize("fmt, marker", [("csv", "knob,parameter,value,stderr"), ("markdown", "| knob |"),
+@pytest.mark.parametrize("fmt, marker", [("csv", "knob,parameter,value,lo,hi,fixed"), ("markdown", "| knob |"),
                                          ("latex", r"\begin{tabular}"), ("json", '"params"')])
 def test_identify_format_is_honoured(tmp_path, fmt, marker):
     res = invoke("identify", SWEEP, "--current-only", "-o", tmp_path / "m.json", "--format", fmt)

@@ -22,6 +22,7 @@ def test_missing_data_dir_is_one_error_line_and_writes_nothing(tmp_path, monkeyp
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_demo_runs_from_a_folder_without_sample_data(tmp_path, monkeypatch):
     # an installed hyst has no sample_data/: the demo records the same data from the twin (issue 12)
     monkeypatch.chdir(tmp_path)
@@ -56,6 +57,7 @@ def test_usage_error_exits_2(tmp_path):
     assert res.exit_code == 2
 
 
+@pytest.mark.slow
 def test_demo_json_and_files(tmp_path):
     out = tmp_path / "o"
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--format", "json", "--out", str(out),
@@ -78,6 +80,7 @@ def test_demo_json_and_files(tmp_path):
     assert res.stderr == ""  # --quiet
 
 
+@pytest.mark.slow
 def test_demo_markdown_shows_paper_beside_ours(tmp_path):
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--format", "markdown",
                               "--out", str(tmp_path / "o"), "--no-figures"])
@@ -98,6 +101,7 @@ def test_demo_markdown_shows_paper_beside_ours(tmp_path):
     assert "demo took" in res.stderr
 
 
+@pytest.mark.slow
 def test_demo_without_diagnosis_has_only_the_papers_tables(tmp_path):
     res = runner.invoke(app, ["demo", "--simulate", "--trials", "1", "--no-diagnose", "--out",
                               str(tmp_path / "o"), "--no-figures"])

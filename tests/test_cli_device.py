@@ -165,6 +165,7 @@ def robot():
     srv.shutdown()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words, back", [
     (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR", True),
     (Fault("garble", at=10), "checksum mismatch", True),
@@ -223,6 +224,7 @@ def test_play_interrupted_without_return_holds_and_says_where(robot, commands):
         assert dev.state(1).angle == pytest.approx(where, abs=1e-3)
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_hyst_play_returns_the_knob(tmp_path):
     """The user's Ctrl-C: `hyst play` in a subprocess, paced through a 12.6 s sweep on `hyst
     sim-robot`, gets SIGINT once it has checked the file and started: exit 130, one line that
@@ -512,6 +514,7 @@ def test_sweep_writes_the_papers_identification_sweep(tmp_path):
     assert res.exit_code == 2 and not (tmp_path / "bad.csv").exists()
 
 
+@pytest.mark.slow
 def test_identify_on_a_sweep_played_on_the_robot(tmp_path):
     """Job 1 on a live robot: `hyst sweep`, `hyst play` on `hyst sim-robot`, `hyst identify` on
     the recording. The bare model (no unmodelled effects) is identified to within a few tenths of

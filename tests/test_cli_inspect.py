@@ -2,11 +2,13 @@
 from __future__ import annotations
 
 import json
+import math
 
 import pytest
 from typer.testing import CliRunner
 
 from hystcli.cli import app
+from hystcli.estimate import Estimate
 from hystcli.io import save_model
 from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
 
@@ -24,7 +26,12 @@ def invoke(*args):
 
 @pytest.fixture
 def models(tmp_path):
-    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, 0.31, {"d_pos": 0.02, "omega": 0.004}, 120.0)
+    # d_pos fixed to [9.06, 9.14], b_pos bounded below only (the record said nothing above 5)
+    estimates = {"d_pos": Estimate(9.1, 9.06, 9.14), "omega": Estimate(1.45, 1.442, 1.458),
+                 "b_pos": Estimate(6.2, 5.0, math.inf, fixed=False, reason="the record ends on the plateau")}
+    ident = KnobIdentification(-40.0, 40.0, method="tip", rmse=0.31, estimates=estimates, current_sign="signed",
+                               slope_dead_zone=0.05, slope_loaded_pos=4.8, slope_loaded_neg=5.2,
+                               no_load_rising=126.0, no_load_falling=114.0)
     straight = Model({1: KnobModel(**EXAMPLE), 2: KnobModel(**EXAMPLE)}, Geometry(1.2, 8.0),
                      meta={"catheter": "ice-a", "source": "sweep.csv"}, identification={1: ident})
     shifted = straight.with_offsets({1: 13.5})
@@ -35,18 +42,21 @@ def models(tmp_path):
     return tmp_path
 
 
-def test_show_lists_parameters_with_uncertainties_and_derived_edges(models):
+def test_show_lists_parameters_with_intervals_and_derived_edges(models):
     res = invoke("show", models / "shifted.json")
     assert res.exit_code == 0, res.output
     rows = {tuple(ln.split()[:2]): ln.split()[2:] for ln in res.stdout.splitlines() if ln.strip()[:1] in "12"}
-    assert rows[("1", "d_pos")][:2] == ["9.100", "0.020"]  # value and its one-sigma uncertainty
-    assert rows[("1", "b_pos")][:2] == ["6.200", "-"]  # no uncertainty known
+    assert rows[("1", "d_pos")][:3] == ["9.100", "9.060", "9.140"]  # value and its interval
+    assert rows[("1", "b_pos")][:3] == ["6.200", "5.000", "inf"]    # open above
+    assert "not fixed: the record ends on the plateau" in " ".join(rows[("1", "b_pos")])
+    assert rows[("1", "b_neg")][:3] == ["5.900", "-", "-"]          # no interval known
     assert rows[("1", "offset")][0] == "13.500"
     assert float(rows[("1", "dhat_pos")][0]) == pytest.approx(DHAT_POS, abs=1e-3)
     assert float(rows[("1", "shifted_d_neg")][0]) == pytest.approx(-8.7 + 13.5, abs=1e-3)
-    # identification: what detect-shift will use (eps_lower = sqrt(0.05 * 4.8), eps_upper = 5 * 4.8)
-    ident = next(ln for ln in res.stdout.splitlines() if ln.split()[:3] == ["1", "-40.000", "40.000"])
-    assert ident.split()[-2:] == [f"{(0.05 * 4.8) ** 0.5:.3f}", "24.000"]
+    # identification: what detect-shift will use: the smaller loaded slope (4.8 of 4.8 and 5.2) and
+    # the no-load level midway between the two directions' (126 and 114 mA)
+    ident = next(ln for ln in res.stdout.splitlines() if ln.split()[:4] == ["1", "tip", "-40.000", "40.000"])
+    assert ident.split()[-4:] == ["signed", "0.050", "4.800", "120.000"]
     assert "catheter ice-a" in res.stdout and "beta_catheter 1.2 mm" in res.stdout
 
 
@@ -56,7 +66,7 @@ def test_show_json_csv_and_effects(models):
     assert data["knobs"]["1"]["params"]["offset"] == 13.5
     assert data["effects"] == [{"name": "creep", "params": {"fraction": 0.27, "tau": 2.4}}]
     csv = invoke("show", models / "augmented.json", "-f", "csv").stdout.splitlines()
-    assert csv[0] == "knob,parameter,value,stderr,note" and len(csv) == 1 + 2 * 12
+    assert csv[0] == "knob,parameter,value,lo,hi,note" and len(csv) == 1 + 2 * 12
     text = invoke("show", models / "augmented.json").stdout
     assert "creep   fraction" in text and "0.270" in text
 

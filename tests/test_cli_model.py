@@ -220,7 +220,7 @@ def test_model_without_the_runs_knob(files):
     ["identify"],                                   # missing argument
     ["compensate", "x.csv"],                        # missing --model and -o
     ["identify", "x.csv", "-o", "m.json", "--omega", "abc"],
-    ["identify", "x.csv", "-o", "m.json", "--bootstrap", "-3"],
+    ["identify", "x.csv", "-o", "m.json", "--level", "1.5"],
     ["no-such-command"],
 ])
 def test_usage_errors_exit_2(args):

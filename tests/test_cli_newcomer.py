@@ -86,6 +86,7 @@ def test_check_exits_0_with_warnings_only_and_quiet_prints_the_errors(tmp_path):
         f"{tmp_path / 'nan.csv'}: error: c1: 1 missing value(s) (empty or NaN), the first at line 21"]
 
 
+@pytest.mark.slow
 def test_identify_with_columns_reads_a_users_csv_as_the_run(mine):
     ours = invoke("identify", mine / "mine.tsv", "--columns", COLUMNS, "--format", "json")
     assert ours.exit_code == 0, ours.output
@@ -295,6 +296,7 @@ def test_user_facing_text_names_no_issue():
     assert strings == []
 
 
+@pytest.mark.slow
 def test_demo_counts_its_steps_as_its_progress_does(tmp_path):
     res = invoke("demo", "--simulate", "--trials", "1", "--no-diagnose", "--no-figures", "--out", tmp_path / "o")
     assert res.exit_code == 0, res.output

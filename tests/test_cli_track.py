@@ -17,7 +17,7 @@ from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.emulator import Fault, serve
 from hystcli.io import Run, read_run, save_model, write_run
-from hystcli.model import KnobIdentification, Model, Shape
+from hystcli.model import Model, Shape
 from hystcli.twin import LiveTwin, periodic, simulate
 from simrobot import TIMEOUT, interrupt_after, start_sim_robot, stop
 
@@ -56,6 +56,7 @@ def _evaluate_rmse(path: Path) -> float:
     return json.loads(res.stdout)["runs"][0]["rmse"]
 
 
+@pytest.mark.slow
 def test_track_on_sim_robot_logs_what_compensate_and_simulate_say(files, tmp_path):
     # the commands hyst compensate writes for the reference (batch inverse, another code path)
     cmds = tmp_path / "cmds.csv"
@@ -116,6 +117,7 @@ def _angle(port: str) -> float:
     return json.loads(res.stdout)["knobs"]["1"]["angle"]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault, words, back", [
     (Fault("garble", at=10), "checksum mismatch", True),
     (Fault("error", at=10, value="E_MOTOR"), "E_MOTOR", True),
@@ -236,13 +238,14 @@ def test_usage_and_input_errors(files, tmp_path):
 # --detect-shift-first: Algorithm 1, then tracking with its offset
 # ------------------------------------------------------------------------------------------
 def test_detect_shift_first_tracks_with_the_detected_offset(tmp_path):
-    """The straight-shaft model with what identification stores (as tests/test_live_detect.py);
-    the reference names no shape, so the offset can only come from the search. By hand (paper eqs.
-    1-4, ice-a: tendons 1.83 mm off axis, 6 mm pulley): 1.83 / 6 * 45 = 13.725 deg."""
-    cur = CAT.current
-    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cur.k_load, q_min=-40.0, q_max=40.0,
-                                   current_dead_zone=cur.no_load) for k in (1, 2)}
-    save_model(tmp_path / "model.json", Model(dict(CAT.knobs), None, identification=ident))
+    """The straight-shaft model with what identification stores (tests/test_live_detect.py's),
+    without its geometry: the reference names no shape, so the offset can only come from the
+    search. By hand (paper eqs. 1-4, ice-a: tendons 1.83 mm off axis, 6 mm pulley): 1.83 / 6 * 45
+    = 13.725 deg."""
+    from test_live_detect import ice_a_model
+
+    live = ice_a_model()
+    save_model(tmp_path / "model.json", Model(live.knobs, None, identification=live.identification))
     t, r = periodic(amplitude=60.0, freq=0.5, cycles=1.0, fs=50.0)
     write_run(tmp_path / "ref.csv", Run({"t": t, "r1": r}, {"motion": "periodic"}))
     out = tmp_path / "run.csv"
@@ -258,6 +261,7 @@ def test_detect_shift_first_tracks_with_the_detected_offset(tmp_path):
     assert np.sqrt(np.mean((run["y1"] - run["r1"]) ** 2)) < 1.0
 
 
+@pytest.mark.slow
 def test_ctrl_c_on_hyst_track_returns_the_knob(files, tmp_path):
     """The user's Ctrl-C: `hyst track` in a subprocess, paced through a 10 s reference on `hyst
     sim-robot`, gets SIGINT a second after it started: exit 130 (as `hyst play`), one line that

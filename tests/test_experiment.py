@@ -23,6 +23,7 @@ def small():
     return ex.run_protocol(catheters=("ice-a",), trials=1, seed=0)
 
 
+@pytest.mark.slow
 def test_reduced_protocol_has_the_tables_structure(small):
     t1 = [c for c in small.table("I") if c.controller != ex.DIAGNOSED]
     t2 = [c for c in small.table("II") if c.controller != ex.DIAGNOSED]
@@ -120,6 +121,7 @@ def test_detected_shift_is_near_the_geometry_of_the_shape(small):
         assert row.result.travel <= ex.DETECT_MAX_TRAVEL
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes_other_seed_other_noise():
     a = ex.run_protocol(catheters=("ice-b",), trials=2, seed=7, scenarios=["alpha=45"])
     b = ex.run_protocol(catheters=("ice-b",), trials=2, seed=7, scenarios=["alpha=45"])
@@ -203,6 +205,7 @@ def test_committed_sample_data_is_what_the_script_makes(tmp_path):
     assert total < 5_000_000
 
 
+@pytest.mark.slow
 def test_full_demo_lands_within_30_percent_of_every_paper_cell():
     # Issue 3, Must-show 1: Tables I and II of the demo (sample_data, 2 catheters x 3 trials)
     # within 30 % of every cell of the paper's (Kim & Mansi, Tables I and II).

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from pathlib import Path
@@ -13,6 +14,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import DataError, ModelError
+from hystcli.estimate import Estimate
 from hystcli.io import (MAX_ABS_VALUE, Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
                         parse_run, read_run, save_model, write_run)
 from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
@@ -97,7 +99,12 @@ def sample_model():
         Geometry(1.2, 8.0),
         (EffectSpec("friction", {"mu": 0.3}),),
         {"catheter": "ice-a", "source": "sweep.csv"},
-        {1: KnobIdentification(0.05, 4.8, -40.0, 40.0, 0.31, {"d_pos": 0.02}, 120.0)},
+        {1: KnobIdentification(-40.0, 40.0, method="tip", rmse=0.31,
+                               estimates={"d_pos": Estimate(9.1, 9.06, 9.14),
+                                          "b_pos": Estimate(6.2, 5.0, math.inf, fixed=False, reason="open above")},
+                               current_sign="signed", current_edges={"pos": Estimate(9.3, 9.2, 9.4)},
+                               slope_dead_zone=0.05, slope_loaded_pos=4.8, no_load_rising=126.0,
+                               no_load_falling=114.0)},
     )
 
 
@@ -277,14 +284,14 @@ def test_values_beyond_the_plausible_are_refused_on_read_and_on_write(tmp_path):
 
 
 def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
-    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, cogging_period=4.7,
+    ident = KnobIdentification(-40.0, 40.0, current_sign="signed", no_load_rising=120.0, cogging_period=4.7,
                                cogging_sin=1.9, cogging_cos=-0.6)
     m = Model({1: KnobModel(9.1, -8.7, 6.2, 5.9, 1.45, -4.0, 4.2)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)
     back = load_model(p).identification[1]
     assert (back.cogging_period, back.cogging_sin, back.cogging_cos) == (4.7, 1.9, -0.6)
-    assert back.ripple(4.7 / 4) == pytest.approx(1.9)
+    assert back.ripple(4.7 / 4) == pytest.approx(1.9)    # sin(pi/2) = 1, cos(pi/2) = 0
     # a model without one writes no cogging keys (older files read the same)
     save_model(p, sample_model())
     assert "cogging" not in p.read_text()
@@ -294,12 +301,14 @@ def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
     ({"cogging_period": 0.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
     ({"cogging_period": -3.0, "cogging_sin": 1.0, "cogging_cos": 0.0}, "cogging_period must be a positive"),
     ({"cogging_period": 4.0, "cogging_sin": 1.0}, "go together"),
-    ({"current_edge_pos_se": -0.1}, "current_edge_pos_se must be a non-negative"),
-    ({"current_edge_neg_se": "wide"}, "current_edge_neg_se"),
+    ({"current_sign": "both"}, "current_sign must be signed or magnitude"),
+    ({"current_edges": {"up": {"value": 1.0, "lo": 0.0, "hi": 2.0}}}, "current_edges keys must be pos/neg"),
+    ({"estimates": {"d_pos": 5}}, "must map names to intervals"),
+    ({"estimates": {"d_pos": {"lo": 1.0, "hi": 2.0}}}, "estimates d_pos: an interval needs value"),
+    ({"estimates": {"d_pos": {"value": 2.5, "lo": 3.0, "hi": 2.0}}}, "interval must be ordered"),
+    ({"q_min": "a"}, "q_min must be a number"),
 ])
 def test_a_bad_identification_field_in_a_model_file_is_one_clear_error(tmp_path, fields, message):
-    import json
-
     p = tmp_path / "m.json"
     save_model(p, sample_model())
     d = json.loads(p.read_text())
@@ -309,33 +318,42 @@ def test_a_bad_identification_field_in_a_model_file_is_one_clear_error(tmp_path,
         load_model(p)
 
 
-def test_the_current_edges_standard_errors_round_trip_through_the_model_file(tmp_path):
-    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, current_edge_pos=4.77,
-                               current_edge_pos_se=0.04, unfixed=("d_pos",))
-    m = Model({1: KnobModel(11.7, -12.4, 25.7, 0.6, 1.45, -4.0, 4.2)}, identification={1: ident})
+def test_open_intervals_round_trip_through_the_model_file_as_null(tmp_path):
+    # a current edge the record bounds on one side only, and a backlash the current did not show
+    ident = KnobIdentification(
+        -40.0, 40.0, method="current",
+        estimates={"b_pos": Estimate(0.0, 0.0, math.inf, fixed=False, reason="not shown by the current"),
+                   "d_pos": Estimate(11.7, 11.5, 11.9)},
+        current_sign="magnitude",
+        current_edges={"pos": Estimate(11.7, 11.5, 11.9), "neg": Estimate(-12.4, -math.inf, -12.0, fixed=False,
+                                                                           reason="seen at the stretch's end")})
+    m = Model({1: KnobModel(11.7, -12.4, 0.0, 0.6, 1.45, -4.0, 4.2)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)
+    raw = json.loads(p.read_text())["identification"]["1"]
+    assert raw["current_edges"]["neg"]["lo"] is None and raw["estimates"]["b_pos"]["hi"] is None
     back = load_model(p).identification[1]
-    assert (back.current_edge_pos, back.current_edge_pos_se, back.current_edge_neg_se) == (4.77, 0.04, None)
-    assert "current_edge_neg_se" not in p.read_text()
+    assert back.current_edges["neg"] == ident.current_edges["neg"]
+    assert back.current_edges["neg"].lo == -math.inf and not back.current_edges["neg"].fixed
+    assert back.estimates["b_pos"].reason == "not shown by the current"
+    assert back.unfixed == ("b_pos",) and back.current_sign == "magnitude" and back.method == "current"
+    assert back.stderr == {"d_pos": pytest.approx(0.2 / 1.959964, rel=1e-5)}
+    assert back == ident
 
 
-def test_an_unfixed_backlash_round_trips_through_the_model_file(tmp_path):
-    import json
-
-    # a current-only identification whose current unloads at once after each reversal: the
-    # backlash stays in the file as 0 deg, listed as unfixed, and reads back the same
-    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, current_dead_zone=120.0, unfixed=("b_pos", "b_neg"))
+def test_a_current_only_model_without_its_backlash_refuses_to_predict(tmp_path):
+    # the backlash stays in the file as 0 deg, marked not fixed; predicting with it would be
+    # predicting with a placeholder, so the model says so (detect-shift can still use it)
+    est = {n: Estimate(0.0, 0.0, math.inf, fixed=False, reason="not shown") for n in ("b_pos", "b_neg")}
+    ident = KnobIdentification(-40.0, 40.0, method="current", estimates=est, current_sign="signed")
     m = Model({1: KnobModel(9.1, -8.7, 0.0, 0.0, 1.45, 0.0, 0.0)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)
-    assert load_model(p).identification[1].unfixed == ("b_pos", "b_neg")
-    # a name that is not a parameter identify can leave unfixed is one clear error
-    d = json.loads(p.read_text())
-    d["identification"]["1"]["unfixed"] = ["b_pos", "omega"]
-    p.write_text(json.dumps(d))
-    with pytest.raises(ModelError, match="unfixed.* d_pos / d_neg / b_pos / b_neg"):
-        load_model(p)
+    back = load_model(p)
+    assert back.identification[1].unfixed == ("b_pos", "b_neg")
+    with pytest.raises(ModelError, match="b_pos and b_neg were not fixed"):
+        back.require_loop([1], "predict")
+    back.require_loop([2], "predict")        # another knob is not refused
 
 
 # ------------------------------------------------------------------------------------------

@@ -3,10 +3,10 @@
 The robot is `hyst sim-robot` in a subprocess (a real pty, another process: nothing mocked above
 the transport), serving the calibrated catheter `hyst simulate` and the demo use, with its
 default effects unless a test says otherwise; the host is the CLI through typer's CliRunner. The
-model is the catheter's true straight-shaft model with the identification `hyst identify` would
-store (thresholds from the twin's current model), so the only thing under test is the live
-search. The reference shift is computed here from the catheter's tendon geometry by the paper's
-eqs. 1-4, never from an output of detect-shift.
+model is the catheter's true straight-shaft model with what `hyst identify` stores for the search
+(the current's take-ups at the true edges, its levels and slopes from the twin's current model),
+so the only thing under test is the live search. The reference shift is computed here from the
+catheter's tendon geometry by the paper's eqs. 1-4, never from an output of detect-shift.
 """
 from __future__ import annotations
 
@@ -19,6 +19,7 @@ from typer.testing import CliRunner
 from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
+from hystcli.estimate import Estimate
 from hystcli.io import load_model, save_model
 from hystcli.model import KnobIdentification, Model
 from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - test_rotate_shift imports them from here
@@ -41,21 +42,31 @@ def shift_by_eqs_1_4(segments: list[tuple[float, float]]) -> dict[int, float]:
     return {1: k * s1, 2: k * s2}
 
 
-def _model() -> Model:
+def ice_a_model() -> Model:
     """The straight-shaft model of the calibrated ice-a with what identification stores for
-    detect-shift: dead-zone slope ~0.5 mA/deg (noise), loaded slope k_load (twin.CurrentParams,
-    kept by the calibration: 4 mA/deg, loading k_load(1+mu) = 5, unloading k_load(1-mu) = 3),
-    dead-zone current = no-load current (120 mA)."""
+    detect-shift, written from the twin's current model (twin.CurrentParams, kept by the
+    calibration) rather than read from a sweep: each tendon is taken up at the knob's true edge;
+    moving, the motor's Coulomb friction puts the dead zone's current at no-load +- coulomb
+    (126 mA rising, 114 falling), which is where the current stands as each tendon is taken up;
+    loaded, the current rises k_load (1 + mu) = 5 mA per deg."""
     cur = CAT.current
-    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cur.k_load, q_min=-40.0,
-                                   q_max=40.0, current_dead_zone=cur.no_load) for k in (1, 2)}
+    moving_up, moving_down = cur.no_load + cur.coulomb, cur.no_load - cur.coulomb
+    ident = {}
+    for k, km in CAT.knobs.items():
+        ident[k] = KnobIdentification(
+            q_min=-40.0, q_max=40.0, method="given", current_sign="signed",
+            current_edges={"pos": Estimate(km.d_pos, km.d_pos - 0.05, km.d_pos + 0.05),
+                           "neg": Estimate(km.d_neg, km.d_neg - 0.05, km.d_neg + 0.05)},
+            no_load_rising=moving_up, no_load_falling=moving_down,
+            slope_loaded_pos=cur.k_load * (1 + cur.mu), slope_loaded_neg=cur.k_load * (1 + cur.mu),
+            edge_level_pos=moving_up, edge_level_neg=moving_down)
     return Model(dict(CAT.knobs), CAT.geometry, meta={"catheter": CAT.name}, identification=ident)
 
 
 @pytest.fixture(scope="module")
 def model_path(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("live") / "model.json"
-    save_model(path, _model())
+    save_model(path, ice_a_model())
     return path
 
 
@@ -98,6 +109,7 @@ def test_geometry_is_the_one_the_reference_uses():
 CASES = [(*s, "default") for s in SHAPES] + [(*SHAPES[2], "none")]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("shape,segments,seed,effects", CASES, ids=[f"{c[0]}-{c[3]}" for c in CASES])
 def test_detect_shift_live_matches_true_shift(model_path, tmp_path, shape, segments, seed, effects):
     true = shift_by_eqs_1_4(segments)
@@ -117,6 +129,7 @@ def test_detect_shift_live_matches_true_shift(model_path, tmp_path, shape, segme
     assert shifted.meta["shift_source"] == f"live:{path}"
 
 
+@pytest.mark.slow
 def test_shorter_hold_and_window_are_options_and_are_checked(model_path, tmp_path):
     # a 0.2 s hold averaged over its last 0.15 s still settles the 25 ms tendon lag and the
     # 16 ms filter delay; straight shaft: the true shift is 0 on both knobs
@@ -135,6 +148,7 @@ def test_shorter_hold_and_window_are_options_and_are_checked(model_path, tmp_pat
     assert not (tmp_path / "x.json").exists()
 
 
+@pytest.mark.slow
 def test_detect_shift_live_returns_knobs_home(model_path, tmp_path):
     """After a successful search both knobs are back where they began (0 deg), read by a fresh
     connection to the same device."""
@@ -163,6 +177,7 @@ FAULTS = [
 ]
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("fault,words,alive", FAULTS, ids=[f[0] for f in FAULTS])
 def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive):
     out = tmp_path / "shifted.json"
@@ -191,6 +206,7 @@ def test_fault_mid_search_stops_safely(model_path, tmp_path, fault, words, alive
         stop(proc)
 
 
+@pytest.mark.slow
 def test_contact_spike_cli_stops_and_writes_nothing(model_path, tmp_path):
     """A 5000 mA current spike (contact) mid-search: the CLI must stop, return the knob, exit 1
     and write nothing (issue 4: 'current ceiling as contact')."""
@@ -224,7 +240,7 @@ def test_contact_spike_live_probe_safety_stop():
         probe = open_probe(server.path, knob=1, timeout=float(TIMEOUT), current_ceiling=2000.0)
         try:
             with pytest.raises(SafetyStop, match=r"ceiling 2000 mA.*returned to 0 deg"):
-                detect_shift(_model(), probe, 1)
+                detect_shift(ice_a_model(), probe, 1)
             assert server.emulator.stops >= 1
             assert server.emulator.moves == 6  # 5 steps + the move home, nothing after the spike
             assert abs(probe.device.state(1).angle) < 1e-3
@@ -237,6 +253,7 @@ def test_contact_spike_live_probe_safety_stop():
 # ---------------------------------------------------------------------------------------------
 # the reply deadline and the connection (issue 12)
 # ---------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_timeout_is_the_reply_deadline(model_path, tmp_path):
     """The 3rd MOVE is answered 1.5 s late: with --timeout 0.5 its deadline (0.5 s + the
     0.35 s dwell + 0.1 s of motion) passes first and the search stops, saying the deadline;

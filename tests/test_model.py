@@ -264,13 +264,15 @@ def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
 
 def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_compensate():
     from hystcli.diagnose import diagnose
+    from hystcli.estimate import Estimate
     from hystcli.io import Run
     from hystcli.model import KnobIdentification
     from hystcli.stream import Compensator
 
     # a current-only identification whose current unloads at once after each reversal keeps
-    # b_pos / b_neg as 0 deg, unfixed: every use of the loop on the tip refuses it, naming the knob
-    ident = KnobIdentification(0.05, 4.8, -40.0, 40.0, unfixed=("b_neg",))
+    # b_neg as 0 deg, not fixed: every use of the loop on the tip refuses it, naming the knob
+    unshown = Estimate(0.0, 0.0, math.inf, fixed=False, reason="the current does not show it")
+    ident = KnobIdentification(-40.0, 40.0, method="current", estimates={"b_neg": unshown})
     knob = KnobModel(9.1, -8.7, 6.0, 0.0, 1.45, -4.0, 4.0)
     model = Model({1: knob, 2: knob}, identification={1: ident})
     t = np.arange(0.0, 1.0, 0.01)
@@ -287,6 +289,8 @@ def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_com
     run2 = Run({"t": t, "q2": 10 * np.sin(t), "r2": np.sin(t)})
     assert np.array_equal(model.predict(run2)["y2"], knob.forward(run2["q2"]))
     Compensator(model, knobs=[2], dt=0.01)
-    # a name identify cannot leave unfixed is refused at the boundary
-    with pytest.raises(ModelError, match="unfixed names omega"):
-        KnobIdentification(0.05, 4.8, -40.0, 40.0, unfixed=("omega",))
+    # a tip identification's unfixed backlash is a value that predicts its record as well as the
+    # best fit: it is used, not refused
+    tip = Model({1: knob}, identification={1: KnobIdentification(-40.0, 40.0, method="tip",
+                                                                  estimates={"b_neg": unshown})})
+    assert np.array_equal(tip.predict(run)["y1"], knob.forward(run["q1"], 0.0))

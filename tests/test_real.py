@@ -5,6 +5,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from hystcli.compensation import predict_tip
 from hystcli.diagnose import diagnose
@@ -16,6 +17,7 @@ from hystcli.model import EffectSpec
 EXCERPT = Path(__file__).parent / "data" / "mrdlab" / "load_freq" / "41_first6000.TXT.gz"
 
 
+@pytest.mark.slow
 def test_real_excerpt_tip_fit_beats_a_linear_fit_in_sample_and_held_out():
     run = convert(EXCERPT, get_preset("mrdlab")).run
     n = len(run)
@@ -52,6 +54,7 @@ def _rmse(e: np.ndarray) -> float:
     return float(np.sqrt(np.mean(e ** 2)))
 
 
+@pytest.mark.slow
 def test_stretch_fitted_at_40_percent_predicts_the_real_30_percent_run():
     runs = _excerpts()
     # the mrdlab preset states each file's resistive load as the run's condition
@@ -72,6 +75,7 @@ def test_stretch_fitted_at_40_percent_predicts_the_real_30_percent_run():
     assert base > 0.8 and stretched < 0.4 * base
 
 
+@pytest.mark.slow
 def test_diagnose_names_the_stretch_across_real_loads_and_where_the_model_holds():
     runs = _excerpts()
     model = identify(runs[20.0]).model

@@ -48,6 +48,7 @@ def _sweep(qs, n_per_deg=20):
     return t, q
 
 
+@pytest.mark.slow
 def test_noiseless_tip_load_plant_recovered():
     case = plants.sweep_case(1, "tip-load", noiseless=True)
     col, tr = case.record.columns, case.truth
@@ -82,6 +83,7 @@ def _stretch_current(q, d_pos, d_neg, seed=0, noise=0.5):
         + noise * rng.standard_normal(q.size)
 
 
+@pytest.mark.slow
 def test_current_edge_open_when_never_reached():
     t, q = _sweep([0.0, -3.0, 20.0, -3.0, 20.0])
     c = _stretch_current(q, 4.0, -5.0)
@@ -92,6 +94,7 @@ def test_current_edge_open_when_never_reached():
     assert not fit["b_pos"].resolved(1.0) and not fit["b_neg"].resolved(1.0)
 
 
+@pytest.mark.slow
 def test_shift_found_and_open_without_an_edge_crossed_from_slack():
     t, q = _sweep([0.0, -20.0, 20.0, -20.0, 20.0, 0.0])
     sweep = R.current_reference(t, q, _stretch_current(q, 4.0, -5.0))
@@ -112,6 +115,7 @@ def test_bad_records_refused():
         R.current_reference(np.arange(100.0), np.zeros(100), np.zeros(100))
 
 
+@pytest.mark.slow
 def test_magnitude_current_folded_about_no_load():
     t, q = _sweep([0.0, -20.0, 20.0, -20.0, 20.0])
     rng = np.random.default_rng(3)

@@ -4,6 +4,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 
 from hystcli import effects as E
 from hystcli import refit as R
@@ -24,9 +25,10 @@ def _sweep(delay: float) -> Run:
     return Run({"t": t, "q1": q, "y1": y})
 
 
+@pytest.mark.slow
 def test_a_latency_widens_the_identified_loop_and_the_refit_gives_it_back():
     sweep = _sweep(0.2)
-    model = identify(sweep, max_misfit=math.inf, refuse_unfixed=False).model
+    model = identify(sweep).model
     # the sweep's 0.2 s at 40 deg/s is 8 deg of knob: identify sees a much wider loop
     assert model.knob(1).b_pos > TRUE.b_pos + 4.0
     sw = R.prepare_sweep(sweep, model)
@@ -62,11 +64,12 @@ def _two_knob_sweep(eff: E.Effect) -> Run:
                 "y2": ys[2] + rng.normal(0.0, 0.05, t.size)})
 
 
+@pytest.mark.slow
 def test_a_two_knob_sweep_carries_a_bend_coupling_and_the_refit_takes_it_off():
     for form in ("input-magnitude", "output-magnitude"):
         eff = E.make_effect("coupling", form, gain=0.1)
         sweep = _two_knob_sweep(eff)
-        model = identify(sweep, max_misfit=math.inf, refuse_unfixed=False).model
+        model = identify(sweep).model
         sw = R.prepare_sweep(sweep, model)
         assert R.carries(eff.type, eff.spec_form, sw)
         kn = R.refit(sw, model, eff)

@@ -1,11 +1,12 @@
 """`hyst rotate-shift` against shifts detected live on the twin after the same body rotation
 (issue 4, Must-show 4).
 
-The shaft keeps one shape ('alpha=90,theta=45': both knob offsets non-zero, 19.41 deg each by
-paper eqs. 1-4 on the calibrated ice-a: 1.83 / 6.0 x 90 x cos 45). `hyst detect-shift --port` on `hyst sim-robot --rotation 0` gives the
-shifted model; `hyst rotate-shift --degrees D` turns it into a prediction for the body rotated by
-D, which must agree with `detect-shift` run on `hyst sim-robot --rotation D`. Neither side is the
-code under test's own reference: both are measured on the twin through the pty.
+The shaft keeps one shape ('alpha=60,theta=45': both knob offsets non-zero, 12.94 deg each by
+paper eqs. 1-4 on the calibrated ice-a: 1.83 / 6.0 x 60 x cos 45). `hyst detect-shift --port` on
+`hyst sim-robot --rotation 0` gives the shifted model; `hyst rotate-shift --degrees D` turns it
+into a prediction for the body rotated by D, which must agree with `detect-shift` run on `hyst
+sim-robot --rotation D`. Neither side is the code under test's own reference: both are measured
+on the twin through the pty.
 """
 from __future__ import annotations
 
@@ -18,16 +19,17 @@ from hystcli.io import load_model
 from hystcli.model import Shape
 from test_live_detect import CAT, detect, model_path, runner, start_sim_robot, stop  # noqa: F401
 
-SHAPE = "alpha=90,theta=45"
+SHAPE = "alpha=60,theta=45"
+
+pytestmark = pytest.mark.slow   # each detection drives both knobs of a robot in another process
 
 
 def _detect_at(model_path, folder, rotation: float):
     out = folder / f"shift_{rotation:g}.json"
     proc, path = start_sim_robot("--shape", SHAPE, "--rotation", f"{rotation:g}", "--seed", "4")
     try:
-        # the default travel limit (the sweep's 40 deg reach plus half the dead zone): the knob
-        # rests 0.6 deg past the new negative edge, so the search crosses the dead zone to the
-        # positive one at 38.2 deg (issue 10: an unloading tendon is no edge)
+        # the default travel limit (the sweep's 40 deg reach plus half the dead zone) reaches the
+        # farthest shifted edge, 18.8 + 17.7 = 36.5 deg at a rotation of 30 deg
         res = detect(model_path, path, out)
     finally:
         stop(proc)

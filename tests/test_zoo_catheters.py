@@ -92,6 +92,7 @@ def test_api_surface():
         cz.make_case(1, [("creep", None, "weak"), ("creep", None, "strong")])
 
 
+@pytest.mark.slow
 def test_determinism():
     spec = (("saturation", None, "mid"), ("lag", "output-second", "weak"))
     a = cz.make_case(7, spec)
