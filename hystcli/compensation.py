@@ -6,12 +6,15 @@ with no effects, exactly each knob's inverse), shifted by the offset in effect f
 (the paper's Compensation+Shift) or not shifted at all (``ignore_shift``: the paper's
 Compensation-Only). ``predict`` runs the chain forward on a run's commands: the "sim" that the
 evaluation and the diagnosis compare with measurement. This module adds what a file needs around
-the chain: which knobs, the metadata, the warnings. :meth:`Model.predict` and
-:meth:`Model.compensate` are these two functions.
+the chain: which knobs, the metadata, the warnings, and, given a motor's limits, what to do with
+the inverse's jumps (across the dead zone, across the backlash at a reversal: within one sample):
+rate-limit them (:func:`hystcli.safety.plan_motion`) and say what the knob's lag costs the tip on
+the model, refuse them, or keep them. :meth:`Model.predict` and :meth:`Model.compensate` are these
+two functions.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -19,6 +22,7 @@ from .effects import chain
 from .errors import DataError, ModelError
 from .io import Run
 from .model import Model
+from .safety import CatchUp, Limits, MotionCheck, plan_motion
 
 
 @dataclass(frozen=True)
@@ -34,11 +38,21 @@ class Compensation:
         Offset the commands used per knob (deg): the shift in effect, or 0 with ``ignore_shift``.
     warnings : tuple of str
         Things the user should know (e.g. commands outside the identified range).
+    check : MotionCheck or None
+        The exact inverse's commands against the limits, when limits were given.
+    catch_ups : dict of int to CatchUp
+        Per knob whose commands were rate-limited (``speed="limit"``), how long the knob lags the
+        exact inverse and the tip error that causes on the model.
+    sent : MotionCheck or None
+        The written commands against the limits, when limits were given.
     """
 
     run: Run
     offsets: dict
     warnings: tuple = ()
+    check: MotionCheck | None = None
+    catch_ups: dict = field(default_factory=dict)
+    sent: MotionCheck | None = None
 
 
 def knobs_of(model: Model, run: Run, prefix: str, what: str, name: str | None = None) -> list[int]:
@@ -58,7 +72,8 @@ def knobs_of(model: Model, run: Run, prefix: str, what: str, name: str | None = 
     return knobs
 
 
-def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Compensation:
+def compensate(model: Model, trajectory: Run, ignore_shift: bool = False, *, limits: Limits | None = None,
+               speed: str = "limit", name: str | None = None) -> Compensation:
     """Knob commands that make the model (with its effects, if any) follow the desired tip angles.
 
     Without effects this is the exact inverse of docs/design.md section 3; with the effects
@@ -74,10 +89,28 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
     ignore_shift : bool
         Use offset 0 for every knob (Compensation-Only) instead of the offset in effect
         (Compensation+Shift; which offset is docs/design.md section 6's rule, :meth:`Model.offsets_for`).
+    limits : Limits, optional
+        A motor's limits: the commands are checked against them (travel is never waived) and a
+        step beyond the speed (acceleration) limit is dealt with as ``speed`` says. None: the
+        exact inverse, unchecked.
+    speed : {"limit", "strict", "fast"}
+        With ``limits``: rate-limit the knob across such a step and let it catch up with the
+        exact inverse (the catch-up and the tip error it causes on the model come back in
+        ``catch_ups`` and as a warning), refuse the commands, or keep the exact inverse
+        (:func:`hystcli.safety.plan_motion`).
+    name : str, optional
+        How a refusal names the commands (default: the trajectory's source), e.g. the file they
+        were to be written to.
 
     Returns
     -------
     Compensation
+
+    Raises
+    ------
+    LimitExceeded
+        With ``limits``: a command beyond the travel limit, or with ``speed="strict"`` a step
+        beyond the speed or acceleration limit.
 
     Notes
     -----
@@ -107,9 +140,9 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
                     f"the identified range {ident.q_min:.1f}..{ident.q_max:.1f} deg: the model is extrapolated")
     controller = "comp" if ignore_shift or all(o == 0.0 for o in offsets.values()) else "comp+shift"
     cols = {"t": trajectory.t}
-    for name, values in trajectory.columns.items():
-        if name != "t" and not (name.startswith("q") and name[1:] in ("1", "2")):
-            cols[name] = values
+    for col, values in trajectory.columns.items():
+        if col != "t" and not (col.startswith("q") and col[1:] in ("1", "2")):
+            cols[col] = values
     cols.update(new_cols)
     meta = dict(trajectory.meta)
     meta["controller"] = controller
@@ -119,7 +152,22 @@ def compensate(model: Model, trajectory: Run, ignore_shift: bool = False) -> Com
         meta["shift_ignored"] = "true"
     else:
         meta.pop("shift_ignored", None)
-    return Compensation(Run(cols, meta, trajectory.source), offsets, tuple(warnings))
+    result = Compensation(Run(cols, meta, trajectory.source), offsets, tuple(warnings))
+    return result if limits is None else _within(model, result, limits, speed, name)
+
+
+def _within(model: Model, result: Compensation, limits: Limits, speed: str, name: str | None) -> Compensation:
+    """``result`` checked against ``limits``, its fast steps dealt with as ``speed`` says; each
+    rate-limited knob's catch-up carries the largest change of the model's tip it causes."""
+    plan = plan_motion(result.run, limits, speed, name=name, action="write")
+    catch_ups: dict[int, CatchUp] = {}
+    if plan.catch_ups:
+        exact, limited = predict_tip(model, result.run), predict_tip(model, plan.run)
+        for k, c in plan.catch_ups.items():
+            catch_ups[k] = replace(c, tip_error=float(np.max(np.abs(limited[k] - exact[k]))))
+    warnings = result.warnings + tuple(c.message for c in catch_ups.values())
+    return replace(result, run=plan.run, warnings=warnings, check=plan.check, catch_ups=catch_ups,
+                   sent=plan.sent)
 
 
 def predict_tip(model: Model, run: Run) -> dict[int, np.ndarray]:

@@ -39,6 +39,7 @@ Everything that was done (rows, rate, ranges, zeroing, flips, drops, drift) come
 """
 from __future__ import annotations
 
+import codecs
 import csv
 import difflib
 import gzip
@@ -49,13 +50,14 @@ import re
 import zlib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Iterable, Mapping, Sequence
+from typing import BinaryIO, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
 from .errors import DataError
 from .filters import lowpass
-from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run
+from . import io
+from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run, odd_line_breaks
 from .io import _parse_meta_line as _meta_line
 
 TARGETS = KNOWN_COLUMNS
@@ -784,8 +786,8 @@ class Layout:
         The column names of the header row, when the file has one.
     separator : str or None
         The separator used (given or sniffed; None: any whitespace).
-    linenos : tuple of int
-        1-based line number of every data row.
+    linenos : sequence of int
+        1-based line number of every data row (a range when the rows follow each other).
     rows : tuple of list of str
         The fields of every data row, as split (not stripped).
     """
@@ -793,7 +795,7 @@ class Layout:
     header: tuple[str, ...]
     names: tuple[str, ...] | None
     separator: str | None
-    linenos: tuple[int, ...]
+    linenos: Sequence[int]
     rows: tuple[list[str], ...]
 
     def split(self, line: str) -> list[str]:
@@ -892,17 +894,27 @@ def resolve_columns(columns: Sequence[ColumnMap], layout: Layout, source: str,
     return tuple(out)
 
 
-def _parse_table(text: str, mapping: ImportMapping, source: str
-                 ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]]:
-    """The layout, the column mappings by target (with any ``as_run`` additions) and the mapped
-    columns, converted to the run's units."""
+def _names_row(mapping: ImportMapping) -> bool | None:
+    """Whether the first data line names the columns (None: when none of its fields is a number)."""
     by_name = any(isinstance(c.column, str) for c in mapping.columns)
-    layout = split_table(text, mapping.separator, mapping.comment, mapping.skip,
-                         None if by_name or mapping.separator == AUTO or mapping.as_run else False, source)
+    return None if by_name or mapping.separator == AUTO or mapping.as_run else False
+
+
+def _resolve(layout: Layout, mapping: ImportMapping, source: str) -> tuple[tuple[ColumnMap, int], ...]:
+    """:func:`resolve_columns` of the mapping, which must give the time or a rate."""
     resolved = resolve_columns(mapping.columns, layout, source, mapping.as_run)
     if not any(c.target == "t" for c, _ in resolved) and mapping.rate is None:
         found = f" (the file has {', '.join(layout.names)})" if layout.names else ""
         raise DataError(f"{source}: no time column: map t=COLUMN{found}")
+    return resolved
+
+
+def _parse_table(text: str, mapping: ImportMapping, source: str
+                 ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]]:
+    """The layout, the column mappings by target (with any ``as_run`` additions) and the mapped
+    columns, converted to the run's units."""
+    layout = split_table(text, mapping.separator, mapping.comment, mapping.skip, _names_row(mapping), source)
+    resolved = _resolve(layout, mapping, source)
     need = max(j for _, j in resolved) + 1
     for lineno, parts in zip(layout.linenos, layout.rows):
         if len(parts) < need:
@@ -936,9 +948,174 @@ def _parse_table(text: str, mapping: ImportMapping, source: str
     return layout, {c.target: c for c, _ in resolved}, cols
 
 
-def _time(cols: dict[str, np.ndarray], linenos: np.ndarray, mapping: ImportMapping, repair: str,
+def _table_fast(path: Path, mapping: ImportMapping, source: str, progress: Callable[[int, int], None] | None = None
+                ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]] | None:
+    """:func:`_parse_table` of a log file by a CSV parser with float64 columns, streamed from the
+    file (gunzipped on the fly): the log is never held whole, as bytes or as text.
+
+    For a log whose rows are plain: after the skipped lines and the comment and blank lines
+    above the first row (and a row of names), no comment or blank line, a one-character (or
+    whitespace) separator, nothing str.splitlines breaks a line at that the parser does not, no
+    NUL byte. None for any other log and for any doubt (a cell that is not a finite number, a
+    short or long row, a corrupt gzip stream): :func:`_parse_table` then reads it and names the
+    problem. What both read the same way (the column names, the mapping's columns) raises here
+    as there.
+    """
+    prefixes = COMMENT_PREFIXES if mapping.comment == AUTO else () if mapping.comment is None else (mapping.comment,)
+    if any(not p.isascii() or not p.strip() or p[0] in "0123456789+-." for p in prefixes):
+        return None
+    if mapping.separator not in (None, AUTO) and not _plain_separator(mapping.separator):
+        return None
+    try:
+        with _open_log(path) as f:
+            return _stream_table(f, mapping, tuple(p.encode() for p in prefixes), source, progress)
+    except (OSError, EOFError, zlib.error):
+        return None   # the line reader's reading says what is wrong with the file
+
+
+def _plain_separator(sep: str | None) -> bool:
+    """Whether the CSV parser splits on ``sep`` as str.split does (None: any whitespace)."""
+    return sep is None or (len(sep) == 1 and sep not in "\r\n\"+-." and not sep.isalnum())
+
+
+def _open_log(path: Path) -> BinaryIO:
+    """The log's bytes as a stream: gunzipped when it is gzip data (by content, not by name)."""
+    f = open(path, "rb")
+    if f.read(2) == b"\x1f\x8b":
+        f.close()
+        return gzip.open(path, "rb")
+    f.seek(0)
+    return f
+
+
+class _Utf8:
+    """Whether a stream of bytes is UTF-8, fed in pieces of whole lines (:func:`read_text`'s
+    choice between UTF-8 and latin-1, without decoding the log)."""
+
+    def __init__(self) -> None:
+        self._decoder = codecs.getincrementaldecoder("utf-8")()
+        self._ok = True
+
+    def feed(self, data: bytes) -> None:
+        if self._ok and not data.isascii():
+            try:
+                self._decoder.decode(data)
+            except UnicodeDecodeError:
+                self._ok = False
+
+    def encoding(self) -> str:
+        if self._ok:
+            try:
+                self._decoder.decode(b"", final=True)
+            except UnicodeDecodeError:
+                self._ok = False
+        return "utf-8" if self._ok else "latin-1"
+
+
+_BOM = b"\xef\xbb\xbf"
+
+
+def _stream_table(f: BinaryIO, mapping: ImportMapping, prefixes: tuple[bytes, ...], source: str,
+                  progress: Callable[[int, int], None] | None
+                  ) -> tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]] | None:
+    utf8 = _Utf8()
+    head: list[bytes] = []
+    lineno, boms = 0, 0
+    while True:  # the head: skipped lines, then comment and blank lines up to the first data line
+        start = f.tell()
+        line = f.readline()
+        if not line or b"\x00" in line or odd_line_breaks(line):
+            return None
+        utf8.feed(line)
+        while lineno == 0 and line.startswith(_BOM):
+            line, boms = line[len(_BOM):], boms + 1
+        lineno += 1
+        body = line.removesuffix(b"\n").removesuffix(b"\r")
+        lead = body.lstrip(b" \t")
+        if lead[:1] == b"\x1f" or lead[:1] >= b"\x80":
+            return None   # whether the line is blank or a comment would depend on its decoding
+        if lineno <= mapping.skip or (prefixes and lead.startswith(prefixes)):
+            head.append(body)
+        elif lead.strip():
+            break
+    # the data lines once over: anything that would make the parser's rows differ from the line
+    # reader's, the first lines (a separator to find, a row of names), and the count of lines,
+    # so that the columns are allocated once
+    f.seek(start)
+    odd = re.compile(rb"\n[ \t\r]*(?:\n" + b"".join(b"|" + re.escape(p) for p in prefixes) + b")")
+    lines, size, last, first_lines = 1, start, b"", []
+    for block in iter(lambda: f.read(1 << 22) + f.readline(), b""):   # whole lines
+        if b"\x00" in block or odd_line_breaks(block) or odd.search(b"\n" + last):
+            return None
+        utf8.feed(block)
+        if len(first_lines) < SNIFF_LINES:
+            first_lines += block.split(b"\n", SNIFF_LINES)[:SNIFF_LINES - len(first_lines)]
+        lines += block.count(b"\n")
+        size += len(block)
+        last = block
+    if odd.search(b"\n" + last.rstrip(b"\r\n")):   # blank lines that end the file are no row for either
+        return None
+    encoding = utf8.encoding()
+    if boms and encoding != "utf-8":
+        return None   # the line reader keeps those bytes, as latin-1 characters
+    text = [ln.decode(encoding).removesuffix("\r") for ln in first_lines if ln.strip()]
+    sep = sniff_separator(text) if mapping.separator == AUTO else mapping.separator
+    if not _plain_separator(sep):
+        return None
+    layout = Layout((), None, sep, (), ())
+    names, first = None, lineno
+    fields = [x.strip() for x in layout.split(text[0])]
+    names_row = _names_row(mapping)
+    if names_row or (names_row is None and not any(_is_number(x) for x in fields)):
+        names = tuple(x.strip("\"'").strip() for x in fields)
+        f.seek(start)
+        start += len(f.readline())
+        first += 1
+    layout = Layout(tuple(line.decode(encoding) for line in head), names, sep, (), ())
+    resolved = _resolve(layout, mapping, source)
+    f.seek(start)
+    cols = _parse_rows(f, lines, size, resolved, mapping, encoding, sep, progress)
+    if cols is None:
+        return None
+    n = len(next(iter(cols.values())))
+    # the rows' line numbers (for _time's messages) as a range: no array of the log's length
+    return (Layout(layout.header, names, sep, range(first, first + n), ()), {c.target: c for c, _ in resolved},
+            cols)
+
+
+def _parse_rows(f: BinaryIO, lines: int, size: int, resolved: tuple[tuple[ColumnMap, int], ...],
+                mapping: ImportMapping, encoding: str, sep: str | None,
+                progress: Callable[[int, int], None] | None) -> dict[str, np.ndarray] | None:
+    """The mapped columns of the rows from where ``f`` is, parsed in blocks into preallocated
+    float64 arrays (:func:`hystcli.io.read_csv_blocks`) and scaled in place; None at any doubt."""
+    import pandas as pd  # here: the command line's start-up must not pay for pandas
+
+    use = sorted({j for _, j in resolved})
+    # the numbers float() reads (_parse_table's): pandas 3's parser rounds correctly, 2's only so asked
+    exact = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+    values = io.read_csv_blocks(f, use, lines, size, progress, usecols=use, encoding=encoding,
+                                sep=r"\s+" if sep is None else sep, quoting=csv.QUOTE_NONE, **exact)
+    if values is None or not all(np.isfinite(v).all() for v in values.values()):
+        return None
+    uses = [j for _, j in resolved]
+    cols: dict[str, np.ndarray] = {}
+    for c, j in resolved:
+        v = values[j]
+        if uses.count(j) > 1:
+            v = v * c.factor + c.offset
+        else:  # in place: the array is this reader's and nothing else reads it
+            v *= c.factor
+            v += c.offset
+        # an import shifts time to start at 0, so only a run's own time must be small already
+        if (c.target != "t" or mapping.as_run) and np.any(np.abs(v) > MAX_ABS_VALUE):
+            return None
+        cols[c.target] = v
+    return cols
+
+
+def _time(cols: dict[str, np.ndarray], linenos: Sequence[int], mapping: ImportMapping, repair: str,
           source: str) -> tuple[dict[str, np.ndarray], int]:
-    n = linenos.size
+    n = len(linenos)
     if "t" not in cols:
         cols = dict(cols, t=np.arange(n) / float(mapping.rate))
         return cols, 0
@@ -988,12 +1165,28 @@ def resample(run_cols: Mapping[str, np.ndarray], rate: float) -> tuple[dict[str,
     return out, aa
 
 
-def _gain_drift(q: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[float, float, np.ndarray]:
-    """Least squares ``y ~ gain*q + b + drift*(t - t0)``: (gain, drift, fitted drift term)."""
-    tt = t - t[0]
-    a = np.column_stack([q, np.ones_like(q), tt])
-    coef, *_ = np.linalg.lstsq(a, y, rcond=None)
-    return float(coef[0]), float(coef[2]), coef[2] * tt
+def _gain_drift(q: np.ndarray, y: np.ndarray, t: np.ndarray) -> tuple[float, float]:
+    """Least squares ``y ~ gain*q + b + drift*(t - t0)``: (gain, drift).
+
+    Through the centred 2x2 normal equations, summed a block at a time: no copy of a column of
+    the log's length, where lstsq's n x 3 matrix and its copies held 150 MB more at the peak of
+    a 2M-row import. The
+    normal equations square the problem's condition: they are used while the centred knob angle
+    and time are far from collinear (1 - correlation^2 above 1e-4, where they agree with lstsq to
+    about 1e-12; a sweep's sine against time is near 1), lstsq beyond (a knob that moves almost
+    in step with time)."""
+    means = (q.mean(), t.mean(), y.mean())
+    sums = np.zeros(5)   # qq, qt, tt, qy, ty of the centred columns, a block at a time
+    for i in range(0, q.size, 1 << 20):
+        qc, tc, yc = (x[i:i + (1 << 20)] - m for x, m in zip((q, t, y), means))
+        sums += (qc @ qc, qc @ tc, tc @ tc, qc @ yc, tc @ yc)
+    qq, qt, tt, qy, ty = sums
+    if qq * tt - qt ** 2 <= 1e-4 * qq * tt:
+        a = np.column_stack([q, np.ones_like(q), t - t[0]])
+        coef, *_ = np.linalg.lstsq(a, y, rcond=None)
+        return float(coef[0]), float(coef[2])
+    gain, drift = np.linalg.solve([[qq, qt], [qt, tt]], [qy, ty])
+    return float(gain), float(drift)
 
 
 def _render_meta(meta: dict[str, str], found: Mapping[str, str], source: str,
@@ -1030,9 +1223,14 @@ def _round(x: np.ndarray, decimals: int | None) -> np.ndarray:
 def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
                  source: str = "<log>", readme: Sequence[str] = ()) -> Imported:
     """Convert the text of one raw log (see :func:`convert`)."""
-    layout, maps, cols = _parse_table(text, mapping, source)
-    header, linenos = list(layout.header), np.array(layout.linenos)
-    rows_read = linenos.size
+    return _convert(_parse_table(text, mapping, source), mapping, options, source, readme)
+
+
+def _convert(table: tuple[Layout, dict[str, ColumnMap], dict[str, np.ndarray]], mapping: ImportMapping,
+             options: ImportOptions, source: str, readme: Sequence[str]) -> Imported:
+    layout, maps, cols = table
+    header, linenos = list(layout.header), layout.linenos
+    rows_read = len(linenos)
     cols, dropped = _time(cols, linenos, mapping, options.time_repair, source)
     warnings: list[str] = []
     if dropped:
@@ -1047,8 +1245,10 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
     med = float(np.median(steps))
     rate_in = 1.0 / med
     irregular = bool(steps.max() > IRREGULAR * med or steps.min() < med / IRREGULAR)
+    step_range = (float(steps.min()), float(steps.max()))
+    del steps  # a big log's columns are the memory: no copy of one kept longer than needed
     if irregular and options.resample is None:
-        warnings.append(f"irregular sampling (steps {steps.min():.6g} .. {steps.max():.6g} s around "
+        warnings.append(f"irregular sampling (steps {step_range[0]:.6g} .. {step_range[1]:.6g} s around "
                         f"{med:.6g} s): {'hyst import ' if mapping.as_run else ''}--resample HZ puts it on a "
                         "uniform grid")
 
@@ -1076,8 +1276,9 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
         q, y = cols.get(f"q{k}"), cols.get(f"y{k}")
         drift = None
         if q is not None and y is not None and np.ptp(q) > 0:
-            _, drift, trend = _gain_drift(q, y, cols["t"])
+            _, drift = _gain_drift(q, y, cols["t"])
             if options.detrend:
+                trend = drift * (cols["t"] - cols["t"][0])
                 cols[f"y{k}"] = y - trend
                 if f"r{k}" in cols:
                     cols[f"r{k}"] = cols[f"r{k}"] - trend
@@ -1144,6 +1345,8 @@ def convert_text(text: str, mapping: ImportMapping, options: ImportOptions = Imp
                         f"({1.0 / (options.resample or rate_in):.3g} s)")
     current = (unit, to_ma) if unstated else None
     meta["import"] = _import_note(mapping, flip, options, knob_reports, dropped, anti_aliased, current)
+    for values in ordered.values():
+        values.setflags(write=False)  # the conversion's own arrays: the run shares them, no copy
     run = Run(ordered, meta, source)
 
     tt = run["t"]
@@ -1177,7 +1380,7 @@ def _import_note(mapping: ImportMapping, flip: bool, options: ImportOptions, kno
 
 
 def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOptions = ImportOptions(),
-            source: str | None = None) -> Imported:
+            source: str | None = None, progress: Callable[[int, int], None] | None = None) -> Imported:
     """Convert one raw log file (plain text or gzip) into a run.
 
     Parameters
@@ -1190,6 +1393,9 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
         Conditioning: zero, flip, resample, detrend, time repair, rounding, extra metadata.
     source : str, optional
         Name used in messages and in ``source_file`` (default: the path).
+    progress : callable, optional
+        ``progress(bytes_parsed, bytes_total)`` after each block of rows of a log of at least
+        :data:`hystcli.io.READ_PROGRESS_BYTES` read by the CSV parser.
 
     Returns
     -------
@@ -1206,9 +1412,11 @@ def convert(path: str | os.PathLike, mapping: ImportMapping, options: ImportOpti
     """
     p = Path(path)
     name = str(path) if source is None else source
-    text = read_text(p)
     readme = _readme_lines(p) if mapping.meta_from_readme else []
-    return convert_text(text, mapping, options, source=name, readme=readme)
+    table = _table_fast(p, mapping, name, progress) if p.is_file() else None
+    if table is None:   # the line reader: the whole text, every line judged and named
+        table = _parse_table(read_text(p), mapping, name)
+    return _convert(table, mapping, options, name, readme)
 
 
 def columns_mapping(spec: str | Sequence[ColumnMap]) -> ImportMapping:
@@ -1228,7 +1436,8 @@ def columns_mapping(spec: str | Sequence[ColumnMap]) -> ImportMapping:
                          meta={"current_unit": CURRENT_UNIT}, as_run=True)
 
 
-def read_mapped(path: str | os.PathLike, mapping: ImportMapping, require: Iterable[str] = ("t",)) -> Imported:
+def read_mapped(path: str | os.PathLike, mapping: ImportMapping, require: Iterable[str] = ("t",),
+                progress: Callable[[int, int], None] | None = None) -> Imported:
     """Read a user's own CSV as a run through a one-off mapping (:func:`columns_mapping`).
 
     Unlike an import, time keeps its values; what an import would warn about (irregular
@@ -1239,7 +1448,7 @@ def read_mapped(path: str | os.PathLike, mapping: ImportMapping, require: Iterab
     DataError
         What :func:`convert` raises, and a column in ``require`` the mapped run lacks.
     """
-    imported = convert(path, mapping, ImportOptions(zero_time=False))
+    imported = convert(path, mapping, ImportOptions(zero_time=False), progress=progress)
     imported.run.require(*require)
     return imported
 

@@ -19,7 +19,7 @@ import tempfile
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
-from typing import Callable, Iterable, Iterator, Mapping
+from typing import BinaryIO, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
@@ -95,8 +95,7 @@ class Run:
         try:
             return self.columns[name]
         except KeyError:
-            raise DataError(f"{self._where()}missing column {name!r} "
-                            f"(columns: {', '.join(self.columns) or 'none'})") from None
+            raise DataError(_missing(self.source, name, self.columns)) from None
 
     @property
     def t(self) -> np.ndarray:
@@ -160,7 +159,17 @@ def _parse_meta_line(line: str) -> tuple[str, str] | None:
     return key, value.strip()
 
 
-def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
+READ_PROGRESS_BYTES = 16 * 2**20
+"""Files at least this big report their reading to a ``progress`` callback (:func:`read_run`): a
+smaller one reads in a fraction of a second."""
+
+READ_CHUNK_ROWS = 200_000
+"""Rows per block of the big-file readers (:func:`read_run`, ``hyst import``'s): blocks bound the
+parser's own buffers and give the progress its steps."""
+
+
+def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",),
+             progress: Callable[[int, int], None] | None = None) -> Run:
     """Read and validate a run CSV.
 
     Parameters
@@ -168,17 +177,29 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
     path : path-like
         The CSV file.
     require : iterable of str
-        Columns that must be present (``t`` always is).
+        Columns that must be present (``t`` always is); checked on the header, before the rows
+        are read.
+    progress : callable, optional
+        ``progress(bytes_read, bytes_total)`` after each block of rows, for files of at least
+        :data:`READ_PROGRESS_BYTES`.
 
     Returns
     -------
     Run
+        Its columns are read-only float64 arrays.
 
     Raises
     ------
     DataError
         Missing or empty file, no header, a missing column, a non-numeric cell, NaN or
         infinity, non-increasing ``t``; the message names the file, column and row.
+
+    Notes
+    -----
+    The rows are parsed from the file in blocks with explicit float64 types (pandas' C
+    parser), never held as text: the peak memory is about the columns plus one block. Any
+    doubt about a file (a parse error, a NaN, a row the parser would shift) sends it through
+    :func:`parse_run`, which finds and names the problem; so both say the same.
     """
     p = Path(path)
     name = str(path)
@@ -187,6 +208,10 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
     if p.is_dir():
         raise DataError(f"{name}: is a directory, not a run CSV")
     try:
+        with open(p, "rb") as f:
+            run = _read_blocks(f, name, require, p.stat().st_size, progress)
+        if run is not None:
+            return run
         # utf-8-sig: Excel starts its UTF-8 CSVs with a byte-order mark, which is not part of 't'
         text = p.read_text(encoding="utf-8-sig")
     except UnicodeDecodeError:
@@ -198,34 +223,12 @@ def read_run(path: str | os.PathLike, require: Iterable[str] = ("t",)) -> Run:
 
 def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",)) -> Run:
     """Parse the text of a run CSV (see :func:`read_run`)."""
-    import pandas as pd  # here, not at the top: pandas alone costs `hyst --help` half a second
     lines = text.removeprefix("\ufeff").splitlines()
-    meta: dict[str, str] = {}
     i = 0
     while i < len(lines) and (lines[i].startswith("#") or not lines[i].strip()):
-        if lines[i].startswith("#"):
-            kv = _parse_meta_line(lines[i])
-            if kv is not None:
-                meta[kv[0]] = kv[1]
         i += 1
-    if i >= len(lines):
-        raise DataError(f"{source}: empty file (no header row)")
-    header = [h.strip() for h in lines[i].split(",")]
-    if len(header) == 1:
-        for sep, name, option in ((";", "semicolons", "';'"), ("\t", "tabs", "tab")):
-            fields = [f.strip() for f in lines[i].split(sep)]
-            if len(fields) > 1:
-                # Excel in many locales writes ';': say exactly how to convert the file
-                spec = ",".join(f"{f}={j + 1}" for j, f in enumerate(fields) if f in KNOWN_COLUMNS)
-                raise DataError(f"{source}: the header has no commas but {len(fields)} fields separated by "
-                                f"{name}; a run CSV is comma-separated: convert it with `hyst import "
-                                f"{source} --sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} "
-                                f"-o converted.csv`")
-    if any(h == "" for h in header):
-        raise DataError(f"{source}: header row has an empty column name")
-    if len(set(header)) != len(header):
-        dup = next(h for h in header if header.count(h) > 1)
-        raise DataError(f"{source}: column {dup!r} appears twice in the header")
+    meta, header = _parse_head(lines[:i + 1], source, require)
+    import pandas as pd  # here, not at the top: pandas alone costs `hyst --help` half a second
     body = "\n".join(lines[i + 1:])
     header_line = i + 1  # 1-based line number of the header
     if not body.strip():
@@ -264,15 +267,149 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
             row, what = problem
             raise DataError(f"{source}: column {col!r}, line {header_line + 1 + row}: {what}")
         cols[col] = arr
-    run = Run(cols, meta, source)
-    run.require("t", *require)
     t = cols["t"]
     dt = np.diff(t)
     if dt.size and not np.all(dt > 0):
         row = int(np.flatnonzero(~(dt > 0))[0]) + 1
         raise DataError(f"{source}: column 't' is not strictly increasing at line {header_line + 1 + row} "
                         f"({float(t[row - 1])!r} then {float(t[row])!r})")
-    return run
+    return Run(cols, meta, source)
+
+
+def _parse_head(lines: list[str], source: str, require: Iterable[str]) -> tuple[dict[str, str], list[str]]:
+    """The metadata and the header of a run CSV from its first lines (metadata and blank lines,
+    then the header, the last), the header checked and the ``require``d columns in it."""
+    meta: dict[str, str] = {}
+    for line in lines[:-1]:
+        if line.startswith("#"):
+            kv = _parse_meta_line(line)
+            if kv is not None:
+                meta[kv[0]] = kv[1]
+    if not lines or lines[-1].startswith("#") or not lines[-1].strip():
+        raise DataError(f"{source}: empty file (no header row)")
+    i = len(lines) - 1
+    header = [h.strip() for h in lines[i].split(",")]
+    if len(header) == 1:
+        for sep, name, option in ((";", "semicolons", "';'"), ("\t", "tabs", "tab")):
+            fields = [f.strip() for f in lines[i].split(sep)]
+            if len(fields) > 1:
+                # Excel in many locales writes ';': say exactly how to convert the file
+                spec = ",".join(f"{f}={j + 1}" for j, f in enumerate(fields) if f in KNOWN_COLUMNS)
+                raise DataError(f"{source}: the header has no commas but {len(fields)} fields separated by "
+                                f"{name}; a run CSV is comma-separated: convert it with `hyst import "
+                                f"{source} --sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} "
+                                f"-o converted.csv`")
+    if any(h == "" for h in header):
+        raise DataError(f"{source}: header row has an empty column name")
+    if len(set(header)) != len(header):
+        dup = next(h for h in header if header.count(h) > 1)
+        raise DataError(f"{source}: column {dup!r} appears twice in the header")
+    for col in ("t", *require):
+        if col not in header:
+            raise DataError(_missing(source, col, header))
+    return meta, header
+
+
+def _missing(source: str | None, name: str, columns: Iterable[str]) -> str:
+    """The message for a column a run lacks."""
+    return (f"{source + ': ' if source else ''}missing column {name!r} "
+            f"(columns: {', '.join(columns) or 'none'})")
+
+
+def odd_line_breaks(data: bytes, start: int = 0) -> bool:
+    """Whether ``data[start:]`` (whole lines) breaks a line where str.splitlines does and a CSV
+    parser does not: a lone carriage return, a vertical tab, a form feed, a file, group or record
+    separator, a next-line or a line or paragraph separator. A reader that parses such bytes as
+    CSV would count lines differently from one that splits the text (:func:`parse_run`). Byte
+    searches, not a regular expression: this runs over every byte of a big file."""
+    if data.count(b"\r", start) != data.count(b"\r\n", start):
+        return True
+    return any(data.find(b, start) >= 0 for b in (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e", b"\xc2\x85",
+                                                  b"\xe2\x80\xa8", b"\xe2\x80\xa9"))
+
+
+def _read_blocks(f: BinaryIO, source: str, require: Iterable[str], size: int,
+                 progress: Callable[[int, int], None] | None) -> Run | None:
+    """:func:`read_run`'s reader: the head line by line, then the rows in blocks straight into
+    preallocated float64 columns. None when the file needs :func:`parse_run` to judge it."""
+    head: list[str] = []
+    while True:
+        raw = f.readline()
+        if not raw:
+            return None          # no header: parse_run says so
+        if not head:
+            raw = raw.removeprefix(b"\xef\xbb\xbf")
+            if raw.startswith(b"\xef\xbb\xbf"):
+                return None      # a second mark: parse_run takes it off too
+        if odd_line_breaks(raw):
+            return None
+        line = raw.decode("utf-8").removesuffix("\n").removesuffix("\r")
+        head.append(line)
+        if line.strip() and not line.startswith("#"):
+            break
+    meta, header = _parse_head(head, source, require)
+    start = f.tell()
+    rows = _count_lines(f, start)
+    if rows is None:
+        return None
+    f.seek(start)
+    cols = read_csv_blocks(f, header, rows, size, progress, names=header, encoding="utf-8")
+    if cols is None:
+        return None
+    for name, arr in cols.items():
+        if _bad_value(name, arr) is not None:
+            return None
+        arr.setflags(write=False)  # shared by the Run as it is (no copy)
+    t = cols["t"]
+    if t.size > 1 and not np.all(np.diff(t) > 0):
+        return None
+    return Run(cols, meta, source)
+
+
+def read_csv_blocks(f: BinaryIO, keys: list, lines: int, size: int,
+                    progress: Callable[[int, int], None] | None, **options: object) -> dict | None:
+    """The columns ``keys`` of the rows pandas' C parser reads from ``f`` (from where it is), a
+    block of :data:`READ_CHUNK_ROWS` rows at a time, into float64 arrays allocated once for
+    ``lines`` rows: the rows are never held as text, nor twice as numbers.
+
+    ``options`` go to :func:`pandas.read_csv` (``names``, ``usecols``, ``sep`` ...).
+    ``progress(position, size)`` follows each block, for a file of at least
+    :data:`READ_PROGRESS_BYTES`. None at any doubt, for the caller's own reader to judge: a parse
+    error, no row, more rows than ``lines``, or a first row with more fields than asked for
+    (pandas would take the surplus as the index and shift the rows).
+    """
+    import pandas as pd  # here, not at the top: pandas alone costs `hyst --help` half a second
+
+    cols = {k: np.empty(lines) for k in keys}
+    n = 0
+    show = progress if progress is not None and size >= READ_PROGRESS_BYTES else None
+    try:
+        with pd.read_csv(f, header=None, dtype=np.float64, engine="c", comment=None, skip_blank_lines=True,
+                         chunksize=READ_CHUNK_ROWS, **options) as blocks:
+            for block in blocks:
+                if not isinstance(block.index, pd.RangeIndex) or n + len(block) > lines:
+                    return None
+                for k in keys:
+                    cols[k][n:n + len(block)] = block[k].to_numpy()
+                n += len(block)
+                if show is not None:
+                    show(min(f.tell(), size), size)
+    except (ValueError, UnicodeDecodeError, pd.errors.ParserError):
+        return None
+    return {k: v[:n] for k, v in cols.items()} if n else None
+
+
+def _count_lines(f: BinaryIO, start: int) -> int | None:
+    """Lines from ``start`` to the end of ``f`` (at least as many as the rows there), or None
+    when one breaks where the CSV parser would not (:func:`odd_line_breaks`)."""
+    f.seek(start)
+    count = 1
+    # blocks of whole lines: no line break is cut in two
+    for block in iter(lambda: f.read(1 << 22) + f.readline(), b""):
+        if odd_line_breaks(block):
+            return None
+        count += block.count(b"\n")
+    return count
 
 
 def _bad_value(column: str, values: np.ndarray) -> tuple[int, str] | None:
@@ -297,26 +434,42 @@ def format_run(run: Run) -> str:
         A value :func:`read_run` would refuse (NaN, infinity, beyond :data:`MAX_ABS_VALUE`):
         hyst never writes a run it cannot read back (NaN would be an empty cell).
     """
-    import pandas as pd
+    return "".join(_run_text(run))
 
+
+_WRITE_ROWS = 50_000
+"""Rows per piece of text :func:`write_run` writes: the file is written piece by piece, never held
+whole."""
+
+
+def _run_text(run: Run) -> Iterator[str]:
+    """The text of a run CSV in pieces (checked first: see :func:`format_run`)."""
     for name, values in run.columns.items():
         problem = _bad_value(name, np.asarray(values))
         if problem is not None:
             row, what = problem
             raise DataError(f"{run._where()}refusing to write column {name!r}, sample {row}: {what} "
                             "(the file could not be read back)")
-    buf = _io.StringIO()
-    for k, v in run.meta.items():
-        v = str(v).replace("\n", " ")
-        buf.write(f"# {k}: {v}\n")
-    df = pd.DataFrame({k: np.asarray(v) for k, v in run.columns.items()})
-    # float_format=None writes repr(), the shortest string that reads back to the same double
-    df.to_csv(buf, index=False, lineterminator="\n")
-    return buf.getvalue()
+    head = "".join(f"# {k}: {str(v).replace(chr(10), ' ')}\n" for k, v in run.meta.items())
+    names = list(run.columns)
+    if not names or any(set(n) & set(',"\r\n') for n in names):
+        # a name the CSV writer quotes (never one read_run reads): pandas writes the whole file
+        import pandas as pd
+
+        buf = _io.StringIO()
+        pd.DataFrame({k: np.asarray(v) for k, v in run.columns.items()}).to_csv(buf, index=False, lineterminator="\n")
+        yield head + buf.getvalue()
+        return
+    yield head + ",".join(names) + "\n"
+    cols = [np.asarray(v, dtype=np.float64) for v in run.columns.values()]
+    # repr: the shortest string that reads back to the same double (what pandas' to_csv writes)
+    for i in range(0, len(run), _WRITE_ROWS):
+        rows = zip(*[map(float.__repr__, c[i:i + _WRITE_ROWS].tolist()) for c in cols])
+        yield "\n".join(map(",".join, rows)) + "\n"
 
 
 def write_run(path: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathLike] = ()) -> None:
-    """Write a run CSV atomically (temporary file + rename).
+    """Write a run CSV atomically (temporary file + rename), piece by piece.
 
     Parameters
     ----------
@@ -326,8 +479,21 @@ def write_run(path: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathL
     inputs : iterable of path-like
         Input files of the command: writing over one of them is refused.
     """
-    text = format_run(run)
-    atomic_write_text(path, text, inputs=inputs)
+    atomic_write(path, _run_writer(run), inputs=inputs)
+
+
+def _run_writer(run: Run) -> Callable[[BinaryIO], None]:
+    """A writer of ``run``'s CSV text to a binary file, piece by piece; the run is checked when
+    this is called, before any file is made."""
+    pieces = _run_text(run)
+    first = next(pieces)
+
+    def write(f: BinaryIO) -> None:
+        f.write(first.encode("utf-8"))
+        for piece in pieces:
+            f.write(piece.encode("utf-8"))
+
+    return write
 
 
 # --------------------------------------------------------------------------------------------
@@ -435,18 +601,26 @@ class PendingOutputs:
     def write_bytes(self, target: str | os.PathLike, data: bytes,
                     inputs: Iterable[str | os.PathLike] = ()) -> None:
         """Stage ``data`` for ``target``."""
-        tmp = self.path(target, inputs)
-        try:
-            with open(tmp, "wb") as f:
-                f.write(data)
-                f.flush()
-                os.fsync(f.fileno())
-        except OSError as exc:
-            raise _cannot_write(target, exc) from None
+        self._write(target, lambda f: f.write(data), inputs)
 
     def write_text(self, target: str | os.PathLike, text: str, inputs: Iterable[str | os.PathLike] = ()) -> None:
         """Stage ``text`` (UTF-8) for ``target``."""
         self.write_bytes(target, text.encode("utf-8"), inputs)
+
+    def write_run(self, target: str | os.PathLike, run: Run, inputs: Iterable[str | os.PathLike] = ()) -> None:
+        """Stage ``run`` as a run CSV for ``target``, piece by piece (:func:`write_run`)."""
+        self._write(target, _run_writer(run), inputs)
+
+    def _write(self, target: str | os.PathLike, writer: Callable[[BinaryIO], object],
+               inputs: Iterable[str | os.PathLike]) -> None:
+        tmp = self.path(target, inputs)
+        try:
+            with open(tmp, "wb") as f:
+                writer(f)
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as exc:
+            raise _cannot_write(target, exc) from None
 
     def discard(self) -> None:
         """Remove every staged file; no target is touched."""

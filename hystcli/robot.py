@@ -21,7 +21,7 @@ import numpy as np
 
 from .device import Device, DeviceInfo, Sample
 from .errors import DataError, HystError, LinkError, SafetyStop
-from .safety import DEFAULT_MOVE_SPEED, Limits, MotionCheck, check_motion, check_target, require_within
+from .safety import DEFAULT_MOVE_SPEED, Limits, Planned, check_target, plan_motion
 
 DEVICE_LIMIT_KEYS = {"travel": "travel", "max_speed": "max_speed"}
 """Optional handshake fields (docs/protocol.md, "Device limits") -> :class:`Limits` fields."""
@@ -255,16 +255,17 @@ def jog(device: Device, knob: int, delta: float, *, max_step: float, speed: floa
 # playing a command trajectory
 # --------------------------------------------------------------------------------------------
 def check_trajectory(device: Device, trajectory: Any, limits: Limits = Limits(), *,
-                     allow_fast: bool = False) -> MotionCheck:
-    """Everything :func:`play_trajectory` checks before its first MOVE, without moving.
+                     speed: str = "strict") -> Planned:
+    """Everything :func:`play_trajectory` checks before its first MOVE, without moving, and the
+    commands it will send (rate-limited with ``speed="limit"``: :func:`hystcli.safety.plan_motion`).
 
     Raises
     ------
     DataError
         No knob command, a knob the device lacks, non-finite values, ``t`` not increasing.
     LimitExceeded
-        A command beyond the travel limit, or a step beyond the speed (or acceleration) limit
-        unless ``allow_fast``.
+        A command beyond the travel limit, or with ``speed="strict"`` a step beyond the speed
+        (or acceleration) limit.
     """
     run = trajectory
     name = run.source or "trajectory"
@@ -276,8 +277,7 @@ def check_trajectory(device: Device, trajectory: Any, limits: Limits = Limits(),
     if missing:
         raise DataError(f"{name} commands knob {missing[0]} but device {info.name} drives knobs "
                         f"{','.join(map(str, info.knobs))}")
-    check = check_motion(run, effective_limits(limits, device), name=name)
-    return require_within(check, allow=("speed", "accel") if allow_fast else (), name=name)
+    return plan_motion(run, effective_limits(limits, device), speed, name=name)
 
 
 class _Pacer:
@@ -302,18 +302,18 @@ class _Pacer:
 
 
 def _send_row(device: Device, info: DeviceInfo, knobs: Iterable[int], q: Any, prev: Any, dt: float,
-              lim: Limits, *, allow_fast: bool, min_speed: float, i: int, t: float) -> tuple[list, list, int]:
+              lim: Limits, *, fast: bool, min_speed: float, i: int, t: float) -> tuple[list, list, int]:
     """One sample's MOVE per knob, each at the speed that covers its step in ``dt`` (``prev``: the
     previous commands, or None for the first sample): (currents, tip angles, steps capped at the
-    speed limit). A step beyond the limit is sent at the limit with ``allow_fast``, else refused."""
+    speed limit). A step beyond the limit is sent at the limit with ``fast``, else refused."""
     c_row, y_row, capped = [], [], 0
     for j, k in enumerate(knobs):
         speed = abs(q[j] - prev[j]) / dt if prev is not None else 0.0
         if speed > lim.max_speed:
-            if not allow_fast:
+            if not fast:
                 raise SafetyStop(f"knob {k} would move at {speed:.1f} deg/s at t={t:g} s, beyond "
                                  f"the speed limit {lim.max_speed:g} deg/s (--allow-fast sends such "
-                                 "steps at the limit)")
+                                 "steps at the limit; without --strict-speed they are rate-limited)")
             speed = lim.max_speed
             capped += 1
         s = device.move(k, q[j], max(speed, min_speed))
@@ -326,7 +326,7 @@ def _send_row(device: Device, info: DeviceInfo, knobs: Iterable[int], q: Any, pr
 
 
 def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
-                    limits: Limits = Limits(), allow_fast: bool = False,
+                    limits: Limits = Limits(), speed: str = "strict",
                     return_on_abort: bool = True, move_speed: float | None = None,
                     min_speed: float = 1e-3,
                     progress: Callable[[int, int], None] | None = None,
@@ -339,8 +339,11 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     first command (untimed, at ``move_speed``), then every sample ``i`` is sent at
     ``t[i] - t[0]`` after the start (``paced``) or as soon as the previous one is answered. Each
     MOVE carries the speed that covers the step in the sample interval, so the motor moves as the
-    trajectory says; with ``allow_fast`` a faster step is sent at the speed limit instead (the
-    knob then arrives late; ``play_speed_capped`` counts those steps).
+    trajectory says. A step beyond the speed (acceleration) limit refuses the trajectory
+    (``speed="strict"``), is sent at the speed limit (``"fast"``: the knob then arrives late;
+    ``play_speed_capped`` counts those steps), or is rate-limited before the play (``"limit"``:
+    the knob crosses it at the limit and catches up with the commands after it; the log's
+    ``q<k>`` are the commands sent and ``play_catchup<k>`` says how long the knob lagged).
 
     Parameters
     ----------
@@ -353,9 +356,9 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
         Follow the file's timing (True) or go as fast as the device answers.
     limits : Limits
         Travel, speed (and acceleration) limits, tightened by the device's announced ones.
-    allow_fast : bool
-        Play steps beyond the speed (or acceleration) limit at the speed limit instead of
-        refusing the file. Travel is never allowed past its limit.
+    speed : {"strict", "fast", "limit"}
+        What to do with a step beyond the speed (or acceleration) limit (above; the modes of
+        :func:`hystcli.safety.plan_motion`). Travel is never allowed past its limit.
     return_on_abort : bool
         On a fault or Ctrl-C, after stopping the motors, move every knob back to where it was
         before the play (True) or hold it where it stopped (False).
@@ -373,7 +376,8 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
         Columns ``t`` (the file's), ``q<k>`` (commands), ``c<k>`` (mA), ``y<k>`` (deg, when the
         device has a tracker), ``r<k>`` when the trajectory has them; the trajectory's metadata
         plus the device identity and ``play_timing``, ``play_max_lag_s``, ``play_peak_speed``,
-        ``play_speed_limit``, ``play_speed_capped``.
+        ``play_speed_limit``, ``play_speed_capped``, ``play_speed_mode`` and, per rate-limited
+        knob, ``play_catchup<k>``.
 
     Raises
     ------
@@ -388,8 +392,8 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     from .io import Run
 
     info = device.info or device.hello()
-    run = trajectory
-    check = check_trajectory(device, run, limits, allow_fast=allow_fast)
+    plan = check_trajectory(device, trajectory, limits, speed=speed)
+    check, run = plan.check, plan.run
     lim = check.limits
     v_move = min(DEFAULT_MOVE_SPEED if move_speed is None else float(move_speed), lim.max_speed)
     knobs = list(check.knobs)
@@ -408,10 +412,10 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
         for i in range(n):
             dt = t[i] - t[i - 1] if i else t[1] - t[0]
             pacer.wait(t[i])
-            # the check refused any step beyond the speed limit unless allow_fast
+            # the plan refused or rate-limited any step beyond the speed limit unless fast
             c_row, y_row, n_capped = _send_row(
                 device, info, knobs, [qs[k][i] for k in knobs], [qs[k][i - 1] for k in knobs] if i else None,
-                dt, lim, allow_fast=allow_fast, min_speed=min_speed, i=i, t=t[i])
+                dt, lim, fast=speed == "fast", min_speed=min_speed, i=i, t=t[i])
             capped += n_capped
             for j, k in enumerate(knobs):
                 c[k][i] = c_row[j]
@@ -439,4 +443,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     meta["play_peak_speed"] = f"{max(m.peak_speed for m in check.knobs.values()):.4g}"
     meta["play_speed_limit"] = f"{lim.max_speed:g}"
     meta["play_speed_capped"] = str(capped)
+    meta["play_speed_mode"] = speed
+    for k, c in plan.catch_ups.items():
+        meta[f"play_catchup{k}"] = c.note
     return Run(cols, meta)

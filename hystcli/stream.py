@@ -32,6 +32,14 @@ Time: the time-driven stages (``rate``, ``creep``, ``latency``) need each sample
 ``t`` to :meth:`Compensator.step`, or give the sample period ``dt`` once (sample ``i`` is then at
 ``i * dt``).
 
+A motor's limits: given ``limits``, every command goes out through a
+:class:`hystcli.safety.RateLimiter` per knob, causally: the inverse's jumps (across the dead zone,
+across the backlash at a reversal) are crossed at the speed (acceleration) limit and the knob
+catches up with the exact commands after them (:attr:`Compensator.catch_ups` says how long it
+lagged). The chain itself keeps following the exact commands: the limiter is the last stage, so
+the knob lands on exactly what ``hyst compensate --allow-fast`` writes once it has caught up (a
+coupling reads the other knob's exact command, not the lagging one).
+
 Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation but the returned
 float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
 (the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
@@ -50,6 +58,7 @@ from .effects.base import Effect, Signals
 from .effects.registry import as_effects
 from .errors import DataError, ModelError
 from .model import KnobModel, Model, Shape, _inverse_py, _kernel
+from .safety import CatchUp, Limits, RateLimiter
 
 LATENCY_MODES = ("delay", "ignore")
 """What a :class:`Compensator` does with a ``latency`` effect (see the module's notes)."""
@@ -385,6 +394,9 @@ class Compensator:
         ``hyst compensate``.
     iterations : int
         Most fixed-point passes per sample for ``coupling`` (two knobs).
+    limits : hystcli.safety.Limits, optional
+        Rate-limit every command to these speed and acceleration limits (module notes); the
+        travel limit is the caller's to check. Needs each sample's time (``t`` or ``dt``).
 
     Raises
     ------
@@ -401,7 +413,8 @@ class Compensator:
 
     def __init__(self, model: Model, knobs: Sequence[int] | None = None, *, dt: float | None = None,
                  shape: Shape | str | None = None, condition: float | None = None,
-                 latency: str = "delay", max_lead: float = 30.0, iterations: int = 50) -> None:
+                 latency: str = "delay", max_lead: float = 30.0, iterations: int = 50,
+                 limits: Limits | None = None) -> None:
         self._model = model
         self._knobs = tuple(int(k) for k in (model.knobs if knobs is None else knobs))
         if not self._knobs or len(set(self._knobs)) != len(self._knobs):
@@ -486,6 +499,9 @@ class Compensator:
                                              self._plan) if self._coupled else None
         # the time-driven stages (lags, creep, the tracker delay) need each sample's time
         self._needs_t = any(e.type.driver in ("speed", "time") for e in self._effects if not e.is_null)
+        self._limiters = None if limits is None else tuple(
+            RateLimiter(k, limits.max_speed, limits.max_accel) for k in self._knobs)
+        self._needs_t = self._needs_t or self._limiters is not None
         if self.delay_s > 0.0 and latency == "delay":
             if self.dt is None:
                 raise ModelError(f"the model's latency ({self.delay_s:g} s) needs the sample period dt "
@@ -534,6 +550,17 @@ class Compensator:
         return tuple(dict.fromkeys(self._warnings))
 
     @property
+    def catch_ups(self) -> dict[int, CatchUp]:
+        """Per knob whose commands the ``limits`` held back so far, how long it lagged the exact
+        commands (:class:`hystcli.safety.CatchUp`); empty without ``limits`` or when none was."""
+        out = {}
+        for lim in self._limiters or ():
+            c = lim.catch_up()
+            if c is not None:
+                out[lim.knob] = c
+        return out
+
+    @property
     def rest_command(self) -> tuple[float, ...]:
         """Per knob, the command while the reference rests at the tip reading it started from (the
         middle of the knob range that holds it): what :meth:`step` returns while the latency
@@ -550,6 +577,8 @@ class Compensator:
             self._chains[k].reset(ys[i])
         if self._fast is not None:
             self._fast.reset()
+        for lim in self._limiters or ():
+            lim.reset()
         self._n = 0          # samples taken
         self._last_t = -math.inf
         self._filled = 0     # samples in the latency buffer
@@ -603,8 +632,8 @@ class Compensator:
         if t is None:
             if self.dt is None:
                 if self._needs_t:
-                    raise DataError(f"sample {self._n}: the model's time-driven effects need the "
-                                    "sample's time t (or a sample period dt)")
+                    raise DataError(f"sample {self._n}: the model's time-driven effects and the rate "
+                                    "limit need the sample's time t (or a sample period dt)")
                 return float(self._n)  # read by no stage
             return self._n * self.dt
         t = float(t)
@@ -614,7 +643,13 @@ class Compensator:
         return t
 
     def _command(self, rs: list[float], t: float) -> tuple[float, ...]:
-        # one sample (after the latency buffer) through every knob's chain
+        # one sample (after the latency buffer) through every knob's chain, then the rate limit
+        q = self._exact(rs, t)
+        if self._limiters is None:
+            return q
+        return tuple(lim.step(v, t) for lim, v in zip(self._limiters, q))
+
+    def _exact(self, rs: list[float], t: float) -> tuple[float, ...]:
         if not self._coupled:
             return tuple(self._chains[k].run(rs[i], t, None) for i, k in enumerate(self._knobs))
         c1, c2 = self._chains[self._knobs[0]], self._chains[self._knobs[1]]
@@ -707,7 +742,8 @@ class Compensator:
             tt = self._time(t)
             self._last_t = tt
             self._n += 1
-            return self._chains[self._knobs[0]].run(r, tt, None)
+            q = self._chains[self._knobs[0]].run(r, tt, None)
+            return q if self._limiters is None else self._limiters[0].step(q, tt)
         rs = self._per_knob(r, f"sample {self._n}")
         for v in rs:
             if not math.isfinite(v):
@@ -795,7 +831,8 @@ class Compensator:
             raise DataError(f"steps: t has shape {tt.shape}, r has {rr.shape[0]} samples")
         if nk == 1 and not self.lookahead and rr.size:
             ch = self._chains[self._knobs[0]]
-            if not ch.tail and ch.head == [ch.hyst] and ch.hyst.plain and np.all(np.isfinite(rr)):
+            timed = tt is not None or self.dt is not None or self._limiters is None
+            if not ch.tail and ch.head == [ch.hyst] and ch.hyst.plain and timed and np.all(np.isfinite(rr)):
                 # the compiled kernel of hystcli.model: the same operations, so the same numbers
                 if tt is not None:
                     self._check_times(tt)
@@ -805,9 +842,14 @@ class Compensator:
                 out = np.empty_like(rr)
                 h.y = float(_kernel(_inverse_py)(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
                 h.x = float(out[-1])
+                first = self._n
                 self._n += rr.size
                 self._last_t = float(tt[-1]) if tt is not None else (
                     (self._n - 1) * self.dt if self.dt is not None else float(self._n - 1))
+                if self._limiters is not None:
+                    times = tt if tt is not None else (first + np.arange(rr.size)) * self.dt
+                    step = self._limiters[0].step
+                    out = np.array([step(q, ti) for q, ti in zip(out.tolist(), times.tolist())])
                 return out
         out = np.empty_like(rr)
         step = self.step

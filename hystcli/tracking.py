@@ -8,12 +8,14 @@ start). What the robot answers (motor current, the tracker's tip angle) is logge
 reference and the commands: the log is a run CSV (docs/design.md section 6) that ``hyst evaluate``
 reads as it is.
 
-Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and
-checked against the limits before the first ``MOVE`` (nothing moves when a command is beyond
-the travel limit, or a step beyond the speed limit without ``allow_fast``); a reference on stdin
-is checked sample by sample, before each ``MOVE``. On any fault (a link error, a garbled or late
-reply, a bad reference line, a limit, Ctrl-C) every motor is stopped, the knobs go back to where
-they began, and the error says where they are; the caller writes nothing.
+Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and checked
+against the limits before the first ``MOVE`` (nothing moves when a command is beyond the travel
+limit, or, with ``speed="strict"``, a step beyond the speed limit); a reference on stdin is checked
+sample by sample, before each ``MOVE``. With ``speed="limit"`` the compensator rate-limits its
+commands as it goes (:class:`hystcli.stream.Compensator`'s ``limits``): the knob crosses the
+inverse's jumps at the speed limit and catches up after them. On any fault (a link error, a garbled
+or late reply, a bad reference line, a limit, Ctrl-C) every motor is stopped, the knobs go back to
+where they began, and the error says where they are; the caller writes nothing.
 
 The core never prints; ``hystcli/cli/track_cmds.py`` renders.
 """
@@ -29,7 +31,7 @@ import numpy as np
 from .errors import DataError, SafetyStop
 from .io import Run
 from .model import Model
-from .safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits
+from .safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits, check_speed_mode
 
 _NAMES = ("t", "r1", "r2")
 
@@ -165,24 +167,28 @@ class TrackResult:
         Per knob, the Algorithm 1 result when the shift was detected first (else empty).
     step_us : float
         Median cost of one :meth:`Compensator.step` during the run (microseconds).
+    catch_ups : dict of int to hystcli.safety.CatchUp
+        Per knob whose commands were rate-limited (``speed="limit"``), how long it lagged.
     """
 
     run: Run
     offsets: dict
     shift: dict = field(default_factory=dict)
     step_us: float = 0.0
+    catch_ups: dict = field(default_factory=dict)
 
 
-def _compensator(model: Model, ref: Reference, knobs: tuple, dt: float, latency: str) -> Any:
+def _compensator(model: Model, ref: Reference, knobs: tuple, dt: float, latency: str,
+                 limits: Limits | None) -> Any:
     from .stream import Compensator
 
     for k in knobs:
         model.knob(k)
-    return Compensator.for_run(model, ref.meta, knobs=knobs, dt=dt, latency=latency)
+    return Compensator.for_run(model, ref.meta, knobs=knobs, dt=dt, latency=latency, limits=limits)
 
 
 def track(device: Any, model: Model, reference: Reference, *, limits: Limits = Limits(),
-          allow_fast: bool = False, paced: bool = True, latency: str = "delay",
+          speed: str = "strict", paced: bool = True, latency: str = "delay",
           detect_shift_first: bool = False, shift_options: Mapping[str, Any] | None = None,
           return_on_abort: bool = True, move_speed: float | None = None, min_speed: float = 1e-3,
           progress: Callable[[int], None] | None = None, clock: Callable[[], float] = time.monotonic,
@@ -200,9 +206,11 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
         :func:`reference_from_run` (a file: checked whole first) or :func:`reference_from_lines`.
     limits : Limits
         Tightened by the device's announced limits.
-    allow_fast : bool
-        Send a step beyond the speed limit at the speed limit (the knob arrives late) instead of
-        refusing it. Travel is never waived.
+    speed : {"strict", "fast", "limit"}
+        A step beyond the speed limit refuses the reference (a file before anything moves, stdin
+        at that sample), is sent at the speed limit (``fast``: the knob arrives late), or is
+        rate-limited by the compensator (``limit``: the knob catches up after it). Travel is never
+        waived.
     paced : bool
         Send sample ``i`` at ``t[i] - t[0]`` after the start (True), or as fast as the robot
         answers.
@@ -240,6 +248,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     from .robot import (_hold_statement, _Pacer, _reraise_with, _return_knobs, _send_row, check_trajectory,
                         effective_limits)
 
+    check_speed_mode(speed)
     info = device.info or device.hello()
     knobs = tuple(reference.knobs)
     for k in knobs:
@@ -263,7 +272,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
         dt = float(np.median(np.diff(reference.run.t)))
     else:
         dt = head[1][0] - head[0][0]
-    comp = _compensator(model, reference, knobs, dt, latency)
+    comp = _compensator(model, reference, knobs, dt, latency, lim if speed == "limit" else None)
     ts: list[float] = []
     rs: list[tuple] = []
     qs: list[tuple] = []
@@ -290,7 +299,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
             if comp.lookahead:
                 q_all = np.vstack([q_all[comp.lookahead:], np.asarray(tail).reshape(-1, len(knobs))])
             check_trajectory(device, Run({"t": run.t, **{f"q{k}": q_all[:, j] for j, k in enumerate(knobs)}},
-                                         source=reference.source), limits, allow_fast=allow_fast)
+                                         source=reference.source), limits, speed=speed)
             comp.reset()
 
         def emit(q: tuple) -> None:
@@ -309,7 +318,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
             else:
                 pacer.wait(t_i)
             c_row, y_row, n_capped = _send_row(device, info, knobs, q, qs[-1] if i else None,
-                                               t_i - ts[i - 1] if i else dt, lim, allow_fast=allow_fast,
+                                               t_i - ts[i - 1] if i else dt, lim, fast=speed == "fast",
                                                min_speed=min_speed, i=i, t=t_i)
             capped += n_capped
             qs.append(tuple(q))
@@ -359,10 +368,13 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     meta.update({"track_timing": "paced" if paced else "fast", "track_max_lag_s": f"{pacer.max_lag:.4f}",
                  "track_latency": latency, "track_lookahead": str(comp.lookahead),
                  "track_speed_limit": f"{lim.max_speed:g}", "track_speed_capped": str(capped),
-                 "track_step_us": f"{step_us:.2f}"})
+                 "track_speed_mode": speed, "track_step_us": f"{step_us:.2f}"})
+    catch_ups = comp.catch_ups
+    for k, c in catch_ups.items():
+        meta[f"track_catchup{k}"] = c.note
     if shift_results:
         meta["shift_source"] = "live: detected before tracking (Algorithm 1)"
-    return TrackResult(Run(cols, meta), offsets, shift_results, step_us)
+    return TrackResult(Run(cols, meta), offsets, shift_results, step_us, catch_ups)
 
 
 def _detect(device: Any, model: Model, knobs: tuple, options: dict) -> dict:

@@ -202,7 +202,7 @@ def test_play_interrupted_returns_the_knob(robot, commands):
         dev.move(1, 3.0, 20.0)
         with pytest.raises(Interrupted, match=r"motors stopped, knob 1 returned to \+3.00 deg"):
             play_trajectory(dev, read_run(commands), paced=False, progress=interrupt,
-                            allow_fast=True)
+                            speed="fast")
         assert robot.emulator.stops == 1
         assert dev.state(1).angle == pytest.approx(3.0, abs=1e-4)
 
@@ -216,7 +216,7 @@ def test_play_interrupted_without_return_holds_and_says_where(robot, commands):
 
     with Device(robot.path, timeout=float(TIMEOUT)) as dev:
         with pytest.raises(Interrupted) as exc:
-            play_trajectory(dev, cmds, paced=False, progress=interrupt, allow_fast=True,
+            play_trajectory(dev, cmds, paced=False, progress=interrupt, speed="fast",
                             return_on_abort=False)
         where = cmds["q1"][7]  # the 8th sample, the last one played
         assert f"knob 1 last reported at {where:+.2f} deg" in str(exc.value)
@@ -281,36 +281,53 @@ def test_play_checks_the_whole_file_before_the_first_move(robot, tmp_path, case,
     # the file is written by hand: write_run would refuse some of these itself
     path.write_text("t,q1\n" + "".join(f"{float(a)!r},{float(b)!r}\n" for a, b in zip(t, q)))
     out = tmp_path / "run.csv"
+    strict = ["--strict-speed"] if case == "speed" else []   # by default a fast step is rate-limited
     res = runner.invoke(app, ["play", str(path), "--port", robot.path, "-o", str(out), "--fast",
-                              "--timeout", TIMEOUT])
+                              "--timeout", TIMEOUT, *strict])
     assert res.exit_code == 1
     assert words in _error_line(res)
     assert robot.emulator.moves == 0 and not out.exists()
 
 
-def test_allow_fast_plays_jumps_at_the_speed_limit(commands, tmp_path):
+def test_play_speed_modes_on_jumps(commands, tmp_path):
     """The robot's motors do 400 deg/s (it refuses faster MOVEs); the compensated commands
-    jump at up to ~1500 deg/s. Without --allow-fast play refuses the file before moving; with
-    it every step goes at most at the 360 deg/s limit, which the robot accepts, and the run
-    says how many steps were capped. A --max-speed above the robot's is tightened to it."""
-    peak = np.max(np.abs(np.diff(read_run(commands)["q1"]) / np.diff(read_run(commands).t)))
+    jump at up to ~1500 deg/s. With --strict-speed play refuses the file before moving; with
+    --allow-fast every step goes at most at the 360 deg/s limit, which the robot accepts, and the
+    run says how many steps were capped; by default the commands are rate-limited before the play
+    (the log's q: what was sent, within the limit, back on the file's commands after each jump)
+    and a warning says how long the knob lags. A --max-speed above the robot's is tightened to it."""
+    asked = read_run(commands)
+    peak = np.max(np.abs(np.diff(asked["q1"]) / np.diff(asked.t)))
     assert peak > 400
-    out = tmp_path / "run.csv"
+    out, limited = tmp_path / "run.csv", tmp_path / "limited.csv"
     with sim_robot("--max-speed", "400") as path:
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
-                                  "--timeout", TIMEOUT])
+                                  "--timeout", TIMEOUT, "--strict-speed"])
         assert res.exit_code == 1 and "beyond the speed limit 360 deg/s" in _error_line(res)
         assert "--allow-fast" in _error_line(res) and not out.exists()
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
-                                  "--timeout", TIMEOUT, "--max-speed", "1000"])
+                                  "--timeout", TIMEOUT, "--max-speed", "1000", "--strict-speed"])
         assert "beyond the speed limit 400 deg/s" in _error_line(res)  # the robot's own
         res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(out), "--fast",
                                   "--timeout", TIMEOUT, "--allow-fast"])
         assert res.exit_code == 0, res.output
+        res = runner.invoke(app, ["play", str(commands), "--port", path, "-o", str(limited), "--fast",
+                                  "--timeout", TIMEOUT, "--max-speed", "1000"])
+        assert res.exit_code == 0, res.output
+        assert "Warning: knob 1: steps beyond the motor's limits rate-limited" in res.stderr
     run = read_run(out)
     assert run.meta["play_speed_limit"] == "360" and int(run.meta["play_speed_capped"]) > 0
     assert float(run.meta["play_peak_speed"]) == pytest.approx(peak, rel=1e-3)
-    np.testing.assert_allclose(run["q1"], read_run(commands)["q1"])
+    np.testing.assert_allclose(run["q1"], asked["q1"])
+    run = read_run(limited)
+    assert run.meta["play_speed_limit"] == "400" and run.meta["play_speed_capped"] == "0"
+    assert run.meta["play_speed_mode"] == "limit" and "catch-ups" in run.meta["play_catchup1"]
+    sent = run["q1"]
+    assert np.max(np.abs(np.diff(sent) / np.diff(run.t))) <= 400.0
+    jumps = np.abs(np.diff(asked["q1"]) / np.diff(asked.t)) > 400.0
+    off = sent != asked["q1"]
+    # each jump lags, then lands (the file ends on a jump, not caught up by its last sample)
+    assert off[1:][jumps].all() and (~off).mean() > 0.8
 
 
 def test_play_refuses_a_knob_the_device_lacks(commands, tmp_path):
@@ -343,7 +360,7 @@ def test_play_core_refuses_before_moving(robot):
         with pytest.raises(LimitExceeded, match="3000.0 deg/s"):
             play_trajectory(dev, traj, paced=False)
         with pytest.raises(LimitExceeded, match="beyond the travel limit"):
-            play_trajectory(dev, traj, paced=False, limits=Limits(travel=20.0), allow_fast=True)
+            play_trajectory(dev, traj, paced=False, limits=Limits(travel=20.0), speed="fast")
     assert robot.emulator.moves == 0
 
 

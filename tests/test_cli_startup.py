@@ -118,3 +118,60 @@ def test_ctrl_c_while_typer_builds_the_commands_is_no_traceback():
             "main()\n")
     res = _python(code)
     assert res.returncode == 130 and res.stderr == "Error: interrupted\n"
+
+
+# ------------------------------------------------------------------------------------------
+# threads: the command line pins BLAS, OpenMP and numba before they load
+# ------------------------------------------------------------------------------------------
+_THREAD_VARS = ("HYST_THREADS", "OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS",
+                "BLIS_NUM_THREADS", "VECLIB_MAXIMUM_THREADS", "NUMEXPR_NUM_THREADS", "NUMBA_NUM_THREADS")
+
+
+def _threads(**env: str) -> tuple[set, int]:
+    """BLAS thread counts (threadpoolctl's, numpy loaded after the entry point's pinning) and the
+    thread count numba will read when it loads, in a process whose environment sets only ``env``
+    of the thread variables."""
+    code = ("import json, os\n"
+            "from hystcli.__main__ import pin_threads\n"
+            "pin_threads()\n"
+            "import numpy\n"
+            "from threadpoolctl import threadpool_info\n"
+            "print(json.dumps([sorted({p['num_threads'] for p in threadpool_info() if p['user_api'] == 'blas'}),"
+            " int(os.environ['NUMBA_NUM_THREADS'])]))\n")
+    base = {k: v for k, v in os.environ.items() if k not in _THREAD_VARS}
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**base, **env})
+    assert res.returncode == 0, res.stderr
+    blas, numba_threads = json.loads(res.stdout)
+    return set(blas), numba_threads
+
+
+def test_the_command_line_pins_threads_to_one_unless_told():
+    if (os.cpu_count() or 1) < 2:
+        pytest.skip("one processor: every thread count is 1")
+    assert _threads() == ({1}, 1)
+    assert _threads(HYST_THREADS="2") == ({2}, 2)
+    # a library's own variable the user set is kept, the others follow HYST_THREADS (or 1)
+    assert _threads(OPENBLAS_NUM_THREADS="2") == ({2}, 1)
+    assert _threads(NUMBA_NUM_THREADS="2", HYST_THREADS="1") == ({1}, 2)
+
+
+def test_a_bad_thread_count_is_a_usage_error_and_help_says_how_to_set_it():
+    res = _python("from hystcli.__main__ import main; import sys; sys.argv = ['hyst', '--help']; main()",
+                  env={"HYST_THREADS": "many"})
+    assert res.returncode == 2 and res.stderr == "Error: HYST_THREADS must be a positive whole number, got 'many'\n"
+    res = _python("from hystcli.__main__ import main; import sys; sys.argv = ['hyst', '--help']; main()")
+    assert "HYST_THREADS" in res.stdout and "OPENBLAS_NUM_THREADS" in res.stdout
+
+
+def test_a_bad_input_file_is_refused_before_anything_heavy_loads(tmp_path):
+    """The error line of a missing or malformed run comes in the command line's own start-up
+    time: scipy, numba, pandas and the fit load only for a file that can be read."""
+    bad = tmp_path / "bad.csv"
+    bad.write_text("time,knob,tip\n0,1,2\n")
+    for path in (tmp_path / "missing.csv", bad):
+        assert _loaded_after(["identify", str(path), "-o", str(tmp_path / "m.json")]) == []
+    # the check sees a heavy library when one loads: pandas reads a readable run
+    good = tmp_path / "good.csv"
+    good.write_text("t,q1\n0,0\n0.1,1\n")
+    assert "pandas" in _loaded_after(["evaluate", str(good)])

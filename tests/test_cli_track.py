@@ -170,22 +170,57 @@ def test_bad_stdin_line_mid_run_stops_and_returns(robot, files, tmp_path):
     assert not out.exists()
 
 
-def test_a_file_beyond_the_speed_limit_is_refused_before_anything_moves(robot, files, tmp_path):
+def test_strict_speed_refuses_a_file_beyond_the_speed_limit_before_anything_moves(robot, files, tmp_path):
     out = tmp_path / "run.csv"
-    res = _track(files, robot.path, out, "--fast")   # no --allow-fast: the dead-zone jumps are too fast
+    res = _track(files, robot.path, out, "--fast", "--strict-speed")   # the dead-zone jumps are too fast
     assert res.exit_code == 1
     line = _error_line(res)
     assert "refusing" in line and "speed limit" in line and "--allow-fast" in line, line
     assert robot.emulator.moves == 0 and not out.exists()
 
 
-def test_stdin_beyond_the_speed_limit_stops_at_that_sample(robot, files, tmp_path):
+def test_strict_speed_on_stdin_stops_at_the_sample_beyond_the_speed_limit(robot, files, tmp_path):
     out = tmp_path / "run.csv"
-    res = _track(files, robot.path, out, "--fast", ref="-", input=(files / "ref.csv").read_text())
+    res = _track(files, robot.path, out, "--fast", "--strict-speed", ref="-",
+                 input=(files / "ref.csv").read_text())
     assert res.exit_code == 1
     line = _error_line(res)
     assert "beyond the speed limit" in line and "knob 1 returned to +0.00 deg" in line, line
     assert not out.exists()
+
+
+def test_by_default_track_rate_limits_as_compensate_does(robot, files, tmp_path):
+    """No speed flag: the compensator rate-limits its commands as they come, from a file and from
+    stdin alike, and they are the commands `hyst compensate` writes by default (the batch inverse
+    and its rate limit over the whole file: another code path); the warning says the lag."""
+    cmds = tmp_path / "cmds.csv"
+    res = runner.invoke(app, ["compensate", str(files / "ref.csv"), "-m", str(files / "model.json"), "-o",
+                              str(cmds), "--quiet"])
+    assert res.exit_code == 0, res.output
+    cmds = read_run(cmds)
+    assert np.max(np.abs(np.diff(cmds["q1"]) / np.diff(cmds.t))) <= 360.0
+    for ref, text in ((None, None), ("-", (files / "ref.csv").read_text())):
+        out = tmp_path / f"run{ref or ''}.csv"
+        res = runner.invoke(app, ["track", ref or str(files / "ref.csv"), "--port", robot.path, "--model",
+                                  str(files / "model.json"), "-o", str(out), "--timeout", TIMEOUT, "--fast"],
+                            input=text)
+        assert res.exit_code == 0, res.output
+        run = read_run(out)
+        assert np.max(np.abs(run["q1"] - cmds["q1"])) <= 1e-9
+        assert run.meta["track_speed_mode"] == "limit" and run.meta["track_speed_capped"] == "0"
+        assert run.meta["track_catchup1"].startswith(f"{_episodes(files, tmp_path)} catch-ups")
+        assert "Warning: knob 1: steps beyond the motor's limits rate-limited" in res.stderr
+
+
+def _episodes(files: Path, tmp_path: Path) -> int:
+    """The steps of the exact inverse beyond 360 deg/s (each one catch-up), counted on `hyst
+    compensate --allow-fast`'s file."""
+    exact = tmp_path / "exact.csv"
+    res = runner.invoke(app, ["compensate", str(files / "ref.csv"), "-m", str(files / "model.json"), "-o",
+                              str(exact), "--quiet", "--allow-fast"])
+    assert res.exit_code == 0, res.output
+    q = read_run(exact)
+    return int(np.sum(np.abs(np.diff(q["q1"]) / np.diff(q.t)) > 360.0))
 
 
 def test_usage_and_input_errors(files, tmp_path):

@@ -6,10 +6,12 @@ jaw = counts * 360/4000 deg, current in A as logged.
 """
 from __future__ import annotations
 
+import dataclasses
 import gzip
 import json
 import math
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -427,6 +429,98 @@ def test_time_drop_leaves_strictly_increasing_time(ticks):
     imp = importer.convert_text(text, SIMPLE, ImportOptions(time_repair="drop"))
     assert np.all(np.diff(imp.run["t"]) > 0)
     np.testing.assert_array_equal(imp.run["q1"], kept)
+
+
+# --------------------------------------------------------------------------------------------
+# a log read by the CSV parser converts as one read line by line
+# --------------------------------------------------------------------------------------------
+def _both(tmp_path, data: bytes, mapping: ImportMapping):
+    """convert() of the file (the CSV parser where it can) and convert_text() of its text (line
+    by line): each the Imported or the error message."""
+    p = tmp_path / "log.txt"
+    p.write_bytes(data)
+    out = []
+    for conv in (lambda: importer.convert(p, mapping), lambda: importer.convert_text(importer.read_text(p), mapping,
+                                                                                       source=str(p))):
+        try:
+            out.append(conv())
+        except DataError as exc:
+            out.append(str(exc))
+    return out
+
+
+def _same(a, b):
+    if isinstance(b, str):
+        assert a == b
+        return
+    assert not isinstance(a, str), a
+    assert dict(a.run.meta) == dict(b.run.meta) and a.report == b.report
+    for name in b.run.columns:
+        np.testing.assert_array_equal(a.run[name], b.run[name])
+
+
+COMMA = ImportMapping(columns=(ColumnMap("t", 1, 0.001), ColumnMap("q1", 3, 360 / 8192), ColumnMap("y1", 2, -1.0, 5.0),
+                               ColumnMap("r1", 2)), separator=",", comment="%", skip=1)
+
+
+@pytest.mark.parametrize("mapping, data", [
+    (SIMPLE, b"% head\n% more\n0 1 2\n1 2 3\n2 3 4\n"),
+    (SIMPLE, b"% head\n\n  0\t1  2 extra\n1 2 3 more\n2 3 4 x\n"),
+    (SIMPLE, b"% head\r\n0 1 2\r\n1 2 3\r\n"),
+    (SIMPLE, b"% head\n0 1 2\n% a note among the rows\n1 2 3\n"),   # line by line: the note is a header line
+    (SIMPLE, b"% head\n0 1 2\n\n1 2 3\n"),
+    (SIMPLE, b"% head\n0 1 2\n1 2\n"), (SIMPLE, b"% head\n0 1 2\n1 2 abc\n"), (SIMPLE, b"% head\n0 1 2\n1 2 nan\n"),
+    (SIMPLE, b"% head\n0 1 2\n1 2 inf\n"), (SIMPLE, b"% head\n0 1 2\n1 2 3 4 5\n"), (SIMPLE, b"% head\n0 1 2\n0 2 3\n"),
+    (SIMPLE, b"% h\xb0\n0 1 2\n1 2 3\n"), (SIMPLE, "% h\u00b0\n0 1 2\n1 2 3\n".encode()), (SIMPLE, b"% head\n0 1 2\n"),
+    (SIMPLE, b"% head\n0 1 2\r1 2 3\n"), (SIMPLE, b"% head\n0 1 2\n1 2 3\x0c\n"), (SIMPLE, b"% head\n0 1_0 2\n1 2 3\n"),
+    (COMMA, b"time,jaw,x,knob\n0, 1,2,3\n1000 ,2, 3,4\n2000,3,4,5\n"),
+    (COMMA, b'time,jaw,x,knob\n0,"1",2,3\n1000,2,3,4\n'), (COMMA, b"time,jaw,x,knob\n0,1,2\n1000,2,3\n"),
+    (COMMA, b"\xef\xbb\xbftime,jaw,x,knob\n%c\n0,1,2,3\n1000,2,3,4\n   \n"),
+])
+def test_the_csv_parser_converts_as_the_line_reader(tmp_path, mapping, data):
+    _same(*_both(tmp_path, data, mapping))
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(st.tuples(st.floats(1e-6, 1e3), st.floats(-1e6, 1e6), st.floats(-1e6, 1e6)), min_size=2, max_size=40),
+       st.sampled_from([" ", "\t", ","]), st.booleans())
+def test_any_plain_log_converts_the_same_by_either_reader(tmp_path_factory, rows, sep, crlf):
+    t = np.cumsum([r[0] for r in rows])
+    nl = "\r\n" if crlf else "\n"
+    text = f"% a header{nl}" + "".join(f"{a!r}{sep}{r[1]!r}{sep}{r[2]!r}{nl}" for a, r in zip(t.tolist(), rows))
+    mapping = dataclasses.replace(SIMPLE, separator=None if sep == " " else sep)
+    p = tmp_path_factory.mktemp("log") / "log.txt"
+    p.write_text(text, newline="")
+    with mock.patch("hystcli.importer._parse_table", side_effect=AssertionError("read line by line")):
+        fast = importer.convert(p, mapping)   # a plain log goes through the CSV parser only
+    _same(fast, importer.convert_text(text, mapping, source=str(p)))
+
+
+def test_the_real_excerpt_streams_through_the_csv_parser_from_gzip():
+    """The committed MRDLab excerpt (gzip, '%' header lines, commas): read on the fly by the CSV
+    parser, to the same run and report as the line reader's."""
+    with mock.patch("hystcli.importer._parse_table", side_effect=AssertionError("read line by line")):
+        fast = importer.convert(LOAD41, MRD)
+    _same(fast, importer.convert_text(importer.read_text(LOAD41), MRD, source=str(LOAD41)))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(50, 20_000), st.floats(0.01, 2.0), st.floats(-3, 3), st.floats(-1, 1), st.floats(-100, 100),
+       st.integers(0, 2**32 - 1))
+def test_gain_and_drift_are_least_squares(n, freq, gain, drift, offset, seed):
+    """The 2x2 normal equations give lstsq's gain and drift on a sweep (a knob sine against time),
+    and near-collinear knob and time go to lstsq itself."""
+    rng = np.random.default_rng(seed)
+    t = np.cumsum(rng.uniform(1e-3, 2e-3, n))
+    for q in (40 * np.sin(2 * np.pi * freq * t) + rng.normal(0, 0.5, n), 3.0 * t + rng.normal(0, 1e-4, n)):
+        y = gain * q + drift * t + offset + rng.normal(0, 0.3, n)
+        a = np.column_stack([q, np.ones_like(q), t - t[0]])
+        want, *_ = np.linalg.lstsq(a, y, rcond=None)
+        got_gain, got_drift = importer._gain_drift(q, y, t)
+        # each coefficient's difference, as the change of the fitted tip it makes, against the tip
+        size = np.linalg.norm(a, axis=0)
+        assert abs(got_gain - want[0]) * size[0] <= 1e-10 * np.linalg.norm(y)
+        assert abs(got_drift - want[2]) * size[2] <= 1e-10 * np.linalg.norm(y)
 
 
 # --------------------------------------------------------------------------------------------

@@ -6,6 +6,7 @@ import math
 import os
 import re
 from pathlib import Path
+from unittest import mock
 
 import numpy as np
 import pytest
@@ -353,3 +354,113 @@ def test_a_current_only_model_without_its_backlash_refuses_to_predict(tmp_path):
     with pytest.raises(ModelError, match="b_pos and b_neg were not fixed"):
         back.require_loop([1], "predict")
     back.require_loop([2], "predict")        # another knob is not refused
+
+
+# ------------------------------------------------------------------------------------------
+# read_run's block reader says what parse_run says
+# ------------------------------------------------------------------------------------------
+def _read_both(tmp_path, data: bytes):
+    """read_run of the file and parse_run of its text: each the run or the error message."""
+    p = tmp_path / "run.csv"
+    p.write_bytes(data)
+    out = []
+    for read in (lambda: read_run(p, require=()),
+                 lambda: parse_run(data.decode("utf-8-sig"), source=str(p), require=())):
+        try:
+            out.append(read())
+        except DataError as exc:
+            out.append(str(exc))
+        except UnicodeDecodeError:
+            out.append(f"{p}: not a text CSV file (not UTF-8)")
+    return out
+
+
+@pytest.mark.parametrize("data", [
+    b"t,q1\n0,1\n0.1,nan\n", b"t,q1\n0,1\n0.1,\n", b"t,q1\n0,1\n0.1,abc\n", b"t,q1\n0,1\n0,2\n",
+    b"t,q1\n0,1,5\n", b"t,q1,y1\n0,1\n", b"t,q1\n0,1,\n0.1,2,\n",   # a surplus first field: no index
+    b"t,q1\n0,1\n0.1,2,3\n", b't,q1\n0,"1"\n', b"t,q1\n0,1\n\n0.1,2\n", b"t,q1\n0,1\r\n0.1,2\r\n",
+    b"t,q1\n0,1\r0.1,2\n", b"t,q1\n0,1\x0c\n0.1,2\n", b"t,q1\n0,1\n0.1,1e308\n", b"t,q1\n0,1\n  \n0.1,2\n",
+    b"\xef\xbb\xbf# catheter: x\n\nt,q1\n0,1\n", b"\xef\xbb\xbf\xef\xbb\xbft,q1\n0,1\n", b"t,q1\n", b"# a: b\n",
+    b"t,q1\n0,\xe4\n", b"t,q1\n0,1\n0.1,inf\n",
+    b"t,q1\n# note\n0,1\n", b"t;q1\n0;1\n", b"t,q1\n 0 , 1 \n0.1,2\n", b"t,q1\n0,1\n0.1,2",
+])
+def test_the_block_reader_reads_or_refuses_as_parse_run(tmp_path, data):
+    fast, slow = _read_both(tmp_path, data)
+    if isinstance(slow, str):
+        assert fast == slow
+    else:
+        assert isinstance(fast, Run), fast
+        assert dict(fast.meta) == dict(slow.meta) and list(fast.columns) == list(slow.columns)
+        for name in slow.columns:
+            np.testing.assert_array_equal(fast[name], slow[name])
+
+
+@settings(max_examples=40, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(st.lists(st.tuples(st.floats(1e-6, 1e3), finite, finite), min_size=1, max_size=30), st.booleans(),
+       st.booleans())
+def test_any_good_run_reads_the_same_in_blocks(tmp_path, rows, crlf, meta):
+    t = np.cumsum([r[0] for r in rows])
+    text = ("# catheter: x\n" if meta else "") + "t,q1,note\n" + "".join(
+        f"{a!r},{r[1]!r},{r[2]!r}\n" for a, r in zip(t.tolist(), rows))
+    data = text.replace("\n", "\r\n").encode() if crlf else text.encode()
+    (tmp_path / "run.csv").write_bytes(data)
+    with mock.patch("hystcli.io.parse_run", side_effect=AssertionError("read twice")):
+        fast = read_run(tmp_path / "run.csv")  # in blocks: a good file needs no second reading
+    slow = parse_run(data.decode(), require=())
+    assert dict(fast.meta) == dict(slow.meta)
+    for name in slow.columns:
+        np.testing.assert_array_equal(fast[name], slow[name])
+
+
+def test_a_big_file_is_read_in_blocks_with_progress_and_without_parse_run(tmp_path, monkeypatch):
+    import hystcli.io as io_mod
+
+    monkeypatch.setattr(io_mod, "READ_CHUNK_ROWS", 7)
+    monkeypatch.setattr(io_mod, "READ_PROGRESS_BYTES", 0)
+
+    def never(*a, **k):
+        raise AssertionError("a good file needs no second reading")
+
+    monkeypatch.setattr(io_mod, "parse_run", never)
+    n = 100
+    p = tmp_path / "run.csv"
+    p.write_text("# motion: sweep\nt,q1,c1\n" + "".join(f"{i / 100!r},{float(np.sin(i))!r},{i}\n\n" for i in range(n)))
+    seen = []
+    run = read_run(p, progress=lambda done, total: seen.append((done, total)))
+    assert len(run) == n and run.meta["motion"] == "sweep"
+    np.testing.assert_array_equal(run["q1"], np.sin(np.arange(n)))
+    assert not run["q1"].flags.writeable
+    # one call per block of 7 rows, bytes growing to the file's size
+    size = p.stat().st_size
+    assert len(seen) == -(-n // 7) and all(total == size for _, total in seen)
+    assert [d for d, _ in seen] == sorted(d for d, _ in seen) and seen[-1][0] == size
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.lists(st.tuples(finite, finite), min_size=0, max_size=40), st.booleans())
+def test_a_run_is_written_as_pandas_writes_it(rows, meta):
+    """The writer joins float reprs piece by piece; pandas' to_csv (what it replaced) is the
+    reference for the bytes."""
+    import io as _io
+
+    import pandas as pd
+
+    cols = {"t": np.arange(len(rows)) * 0.01, "q1": [r[0] for r in rows], "c1": [r[1] for r in rows]}
+    run = Run(cols, {"catheter": "x\ny"} if meta else {})
+    buf = _io.StringIO()
+    pd.DataFrame({k: np.asarray(v, dtype=float) for k, v in cols.items()}).to_csv(buf, index=False, lineterminator="\n")
+    assert format_run(run) == ("# catheter: x y\n" if meta else "") + buf.getvalue()
+
+
+def test_a_long_run_is_written_in_pieces_that_read_back(tmp_path, monkeypatch):
+    import hystcli.io as io_mod
+
+    monkeypatch.setattr(io_mod, "_WRITE_ROWS", 3)
+    run = Run({"t": np.arange(10) / 7, "q1": np.sin(np.arange(10))}, {"motion": "sweep"})
+    write_run(tmp_path / "r.csv", run)
+    back = read_run(tmp_path / "r.csv")
+    assert (tmp_path / "r.csv").read_text() == format_run(run) and back.meta["motion"] == "sweep"
+    np.testing.assert_array_equal(back["q1"], run["q1"])
+    with pytest.raises(DataError, match="refusing to write column 'q1', sample 9"):
+        write_run(tmp_path / "bad.csv", Run({"t": np.arange(10.0), "q1": np.r_[np.zeros(9), np.nan]}))
+    assert not (tmp_path / "bad.csv").exists() and sorted(p.name for p in tmp_path.iterdir()) == ["r.csv"]

@@ -14,8 +14,9 @@ from hypothesis import strategies as st
 
 from hystcli.errors import DataError, SafetyStop
 from hystcli.io import Run
-from hystcli.safety import (DEFAULT_MAX_SPEED, DEFAULT_TRAVEL, LimitExceeded, Limits, check_motion,
-                            check_target, knob_motion, require_within)
+from hystcli.safety import (DEFAULT_MAX_SPEED, DEFAULT_TRAVEL, LimitExceeded, Limits, RateLimiter,
+                            check_motion, check_target, knob_motion, plan_motion, rate_limit,
+                            require_within)
 
 
 def test_peaks_by_hand():
@@ -158,3 +159,98 @@ def test_a_ramp_has_its_slope_and_no_acceleration(t, v):
     m = knob_motion(t, v * (t - t[0]), 1)
     assert m.peak_speed == pytest.approx(abs(v), rel=1e-9, abs=1e-9)
     assert m.peak_accel == pytest.approx(0.0, abs=1e-6 * max(1.0, abs(v)) / min(np.diff(t)))
+
+
+# ------------------------------------------------------------------------------------------
+# rate limiting
+# ------------------------------------------------------------------------------------------
+def test_a_jump_is_crossed_at_the_speed_limit_by_hand():
+    # a 10 deg jump at 100 Hz under 360 deg/s: 3.6 deg a sample, so 3 samples to land (3.6, 7.2,
+    # then the rest), after which the commands are the asked ones again
+    t = np.arange(8) * 0.01
+    q = np.array([0.0, 0.1, 10.2, 10.3, 10.4, 10.5, 10.6, 10.7])
+    out, c = rate_limit(t, q, 1, Limits())
+    np.testing.assert_allclose(out[:5], [0.0, 0.1, 0.1 + 3.6, 0.1 + 7.2, 10.4], atol=1e-6)
+    np.testing.assert_array_equal(out[4:], q[4:])
+    # lagging at samples 2 and 3 (t=0.02 and 0.03), landed at t=0.04
+    assert (c.episodes, c.samples, c.caught_up) == (1, 2, True)
+    assert c.longest == pytest.approx(0.02) and c.longest_t == pytest.approx(0.02)
+    assert c.total == pytest.approx(0.02)
+    assert c.largest_gap == pytest.approx(10.2 - 3.7, abs=1e-6)
+    assert "by up to 0.02 s (from t=0.02 s)" in c.message and "once" in c.message
+    # within limits: nothing to say
+    assert rate_limit(t, np.linspace(0, 1, 8), 1, Limits())[1] is None
+
+
+def test_a_catch_up_under_way_at_the_end_counts_to_the_last_sample():
+    t = np.arange(4) * 0.01
+    out, c = rate_limit(t, [0.0, 0.0, 50.0, 50.0], 2, Limits())
+    assert out[-1] == pytest.approx(7.2, abs=1e-6)
+    assert not c.caught_up and c.longest == pytest.approx(0.01) and "had not caught up" in c.message
+
+
+_targets = st.lists(st.floats(-60, 60), min_size=3, max_size=60)
+
+
+@settings(max_examples=150, deadline=None)
+@given(_targets, st.floats(5.0, 2000.0), st.one_of(st.none(), st.floats(50.0, 1e5)),
+       st.floats(0.001, 0.05))
+def test_rate_limited_commands_keep_to_the_limits_and_land_on_a_resting_target(qs, vmax, amax, dt):
+    """Any commands, any limits: what the limiter sends passes the same check that refuses the
+    asked ones, and a target that then rests long enough is reached exactly."""
+    rest = 2 * (120.0 / (vmax * dt) + (vmax / amax / dt if amax else 0.0)) + 10
+    q = np.array(qs + [qs[-1]] * int(rest))
+    t = np.arange(q.size) * dt
+    out, _ = rate_limit(t, q, 1, Limits(max_speed=vmax, max_accel=amax))
+    check = check_motion(Run({"t": t, "q1": out}), Limits(travel=1e9, max_speed=vmax, max_accel=amax))
+    assert check.ok, check.violations
+    assert out[-1] == q[-1]
+    if amax is None:  # without an acceleration limit the knob never passes what it was asked
+        assert out.min() >= q.min() and out.max() <= q.max()
+
+
+@settings(max_examples=100, deadline=None)
+@given(st.floats(-30, 30), st.floats(1.0, 30.0), st.floats(50.0, 1e4))
+def test_with_an_acceleration_limit_a_moving_command_is_caught_without_overshoot(jump, speed, amax):
+    """A ramp (a command moving at its own speed) with one jump, once the knob has taken up the
+    ramp's speed (from rest, with the lag that builds meanwhile, about 2 speed / amax: under
+    1.2 s here): the knob brakes in time and lands
+    on the ramp, never beyond it in the jump's direction."""
+    dt = 0.01
+    t = np.arange(4000) * dt
+    q = speed * t + np.where(t >= 5.0, jump, 0.0)
+    out, c = rate_limit(t, q, 1, Limits(max_speed=360.0, max_accel=amax))
+    assert out[-1] == q[-1] and (c is None or c.caught_up)
+    assert np.all(out[(t > 3.0) & (t < 5.0)] == q[(t > 3.0) & (t < 5.0)])
+    past = ((out - q) * np.sign(jump))[t >= 5.0]
+    assert past.max() <= 1e-9
+
+
+def test_the_limiter_steps_as_the_batch_runs():
+    t = np.arange(50) * 0.02
+    q = np.where(t > 0.3, 30.0, 0.0) + 5 * np.sin(t)
+    batch, c = rate_limit(t, q, 1, Limits(max_accel=3000.0))
+    lim = RateLimiter(1, 360.0, 3000.0)
+    assert [lim.step(a, b) for a, b in zip(q, t)] == batch.tolist()
+    assert lim.catch_up() == c
+    lim.reset()
+    assert lim.step(99.0, 5.0) == 99.0 and lim.catch_up() is None
+
+
+def test_plan_motion_by_mode():
+    t = np.arange(12) * 0.01
+    run = Run({"t": t, "q1": np.where(t > 0.015, 20.0, 0.0), "q2": np.zeros(t.size)})
+    with pytest.raises(LimitExceeded, match="beyond the speed limit 360"):
+        plan_motion(run, Limits(), "strict")
+    fast = plan_motion(run, Limits(), "fast")
+    assert fast.run is run and not fast.sent.ok and not fast.catch_ups
+    limited = plan_motion(run, Limits(), "limit")
+    assert limited.sent.ok and not limited.check.ok and set(limited.catch_ups) == {1}
+    np.testing.assert_array_equal(limited.run["q2"], run["q2"])  # a knob within the limits is kept
+    assert limited.run["q1"][-1] == 20.0 and limited.run["q1"][2] < 20.0
+    # travel is never waived, whatever the mode
+    for mode in ("strict", "fast", "limit"):
+        with pytest.raises(LimitExceeded, match="travel limit"):
+            plan_motion(run, Limits(travel=10.0), mode)
+    with pytest.raises(DataError, match="speed mode"):
+        plan_motion(run, Limits(), "slow")

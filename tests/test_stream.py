@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import hystcli
+import hystcli.safety
 from hystcli import effects as E
 from hystcli import twin
 from hystcli.cli import app
@@ -124,6 +125,41 @@ def test_compensate_cli_bytes_are_the_stream(tmp_path):
     c = hystcli.Compensator.for_run(model, ref.meta, knobs=[1], dt=0.01)
     q = np.array([c.step(r) for r in ref["r1"]])  # times from dt: i * 0.01
     assert np.max(np.abs(q - written["q1"])) <= 1e-6
+
+
+@pytest.mark.parametrize("effects, ref_name", [
+    ((), "periodic"), ((), "nonperiodic"),
+    ((E.make_effect("latency", "tracker", delay=0.035),), "periodic"),
+    ((E.make_effect("rate", "input", tau=0.05),), "nonperiodic"),
+], ids=["base", "base-2", "latency", "rate-2"])
+def test_with_limits_the_stream_rate_limits_as_compensate_does(effects, ref_name):
+    """With a motor's limits each command goes through the rate limiter as it comes: the same
+    commands `compensate` gives with the same limits (its limiter runs over the whole file), one
+    sample at a time and as a block, within the limits, and the same catch-ups."""
+    ref = REFS[ref_name].with_meta(shape=BENT)
+    knobs = ref.knobs("r")
+    model = _model(*effects)
+    lim = hystcli.safety.Limits(max_speed=200.0, max_accel=20000.0)
+    batch = compensate(model, ref, limits=lim)
+    assert batch.catch_ups and batch.sent.ok
+    c = hystcli.Compensator.for_run(model, ref.meta, knobs=knobs, dt=0.01, limits=lim)
+    q = _stream(c, ref, knobs)
+    assert set(c.catch_ups) == set(batch.catch_ups)
+    for j, k in enumerate(knobs):
+        assert np.max(np.abs(q[:, j] - batch.run[f"q{k}"])) <= 1e-6, k
+        assert c.catch_ups[k].episodes == batch.catch_ups[k].episodes
+    c.reset()
+    assert c.catch_ups == {}
+    if len(knobs) == 1 and not c.lookahead:
+        block = c.steps(ref["r1"], ref.t)
+        assert np.max(np.abs(block - batch.run["q1"])) <= 1e-6
+
+
+def test_limits_need_the_samples_time():
+    c = hystcli.Compensator(_model(), knobs=[1], limits=hystcli.safety.Limits())
+    with pytest.raises(DataError, match="need the sample's time"):
+        c.step(1.0)
+    assert c.step(1.0, 0.0) == pytest.approx(c.step(1.0, 0.01))
 
 
 # ------------------------------------------------------------------------------------------

@@ -70,6 +70,9 @@ app = typer.Typer(
     add_completion=True,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
+    epilog="Threads: hyst runs BLAS, OpenMP and numba on 1 thread (its algebra is small; more threads "
+           "only wait for each other on a busy machine). HYST_THREADS=N gives them N; an "
+           "OMP_NUM_THREADS, OPENBLAS_NUM_THREADS or NUMBA_NUM_THREADS you set is kept.",
     context_settings={"help_option_names": ["--help", "-h"]},
 )
 
@@ -319,14 +322,16 @@ def columns_mapping(spec: Optional[str]) -> Any:
 
 def load_run(path: Path, columns: Any = None, require: tuple[str, ...] = ("t",), quiet: bool = False) -> Any:
     """Read one run CSV, or a user's own CSV through a ``--columns`` mapping (from
-    :func:`columns_mapping`), warning on stderr about what the mapping's reading found."""
+    :func:`columns_mapping`), warning on stderr about what the mapping's reading found; a big file
+    shows its reading on a terminal (:func:`reading`)."""
     from .. import io
 
-    if columns is None:
-        return io.read_run(path, require=require)
-    from .. import importer
+    with reading(path, quiet) as progress:
+        if columns is None:
+            return io.read_run(path, require=require, progress=progress)
+        from .. import importer
 
-    imported = importer.read_mapped(path, columns, require=require)
+        imported = importer.read_mapped(path, columns, require=require, progress=progress)
     if not quiet:
         for w in imported.report.warnings:
             warn(f"{path}: {w}")
@@ -429,6 +434,18 @@ def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]
             typer.echo(f"{count}{message}", err=True)
 
     yield update
+
+
+@contextlib.contextmanager
+def reading(path: Path, quiet: bool = False) -> Iterator[Optional[Callable[[int, int], None]]]:
+    """The ``progress`` of a big file's reading (:func:`hystcli.io.read_run`,
+    :func:`hystcli.importer.convert`): a rich bar on stderr, in MiB, only when stderr is a
+    terminal (a log gets no lines of it); None otherwise."""
+    if quiet or not stderr_is_tty():
+        yield None
+        return
+    with _rich_progress() as update:
+        yield lambda done, total: update(f"reading {Path(path).name}", done >> 20, total >> 20)
 
 
 @contextlib.contextmanager

@@ -22,9 +22,9 @@ from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
 from .app import (BaudOpt, ColumnsOpt, EffectOpt, FormatOpt, KnobsAliasOpt, OutOpt, OutputFormat, QuietOpt,
                   columns_mapping, command, echo_json, echo_table, effects_option, fail, info, load_run, one_of,
-                  parse_knobs, stderr_is_tty)
-from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, MaxSpeedOpt, MoveSpeedOpt, TimeoutOpt,
-                         TravelLimitOpt, finite, limit_hint, limits, positive)
+                  parse_knobs, stderr_is_tty, warn)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, MaxSpeedOpt, MoveSpeedOpt, StrictSpeedOpt,
+                         TimeoutOpt, TravelLimitOpt, finite, limit_hint, limits, positive, speed_mode)
 
 PortArg = Annotated[str, typer.Option("--port", help="Serial port of the robot (name or pyserial URL).",
                                       show_default=False)]
@@ -204,6 +204,7 @@ def play_cmd(
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
     max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
+    strict_speed: StrictSpeedOpt = False,
     no_return: NoReturnOpt = False,
     columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
@@ -212,13 +213,17 @@ def play_cmd(
 
     The whole file is checked before the first MOVE: finite values, increasing t, knobs the
     robot has, every command within --travel-limit and every step within --max-speed (the
-    robot's own announced limits when tighter). On any fault or Ctrl-C every motor is stopped,
+    robot's own announced limits when tighter). A faster step is rate-limited (the knob crosses
+    it at the limit and catches up; a warning says how long it lags; q in the output is what was
+    sent), sent at the limit with --allow-fast, or refused with --strict-speed. On any fault or
+    Ctrl-C every motor is stopped,
     the knobs go back to where they began (--no-return: they hold), the error says where each
     knob is, nothing is written, and the exit code is non-zero.
     """
     from ..robot import Interrupted, check_trajectory, play_trajectory
     from ..safety import LimitExceeded
 
+    mode = speed_mode(allow_fast, strict_speed)
     io.check_not_input(output, [trajectory])
     folder = output.parent if str(output.parent) else Path(".")
     if not folder.is_dir():
@@ -230,9 +235,12 @@ def play_cmd(
              f"{','.join(map(str, device.info.knobs))}, tracker {'yes' if device.info.tracker else 'no'})",
              quiet)
         try:
-            check = check_trajectory(device, run, lim, allow_fast=allow_fast)
+            plan = check_trajectory(device, run, lim, speed=mode)
         except LimitExceeded as exc:
             raise type(exc)(f"{exc}{limit_hint(exc)}", exc.check) from None
+        for c in plan.catch_ups.values():
+            warn(c.message)
+        check = plan.check
         info("checked: " + "; ".join(
             f"knob {k} {m.q_min:+.1f}..{m.q_max:+.1f} deg, peak {m.peak_speed:.1f} deg/s"
             for k, m in check.knobs.items()) + f" (limits +-{check.limits.travel:g} deg, "
@@ -245,7 +253,7 @@ def play_cmd(
                 if i % step == 0 or i == n:
                     typer.echo(f"\rplaying {i}/{n}", err=True, nl=i == n)
         try:
-            result = play_trajectory(device, run, paced=not fast, limits=lim, allow_fast=allow_fast,
+            result = play_trajectory(device, run, paced=not fast, limits=lim, speed=mode,
                                      return_on_abort=not no_return, progress=progress)
         except Interrupted as exc:
             _interrupted(exc)

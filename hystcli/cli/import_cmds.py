@@ -19,9 +19,9 @@ import typer
 
 from .. import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
 from ..errors import DataError
-from ..io import all_or_none, check_not_input, format_run
-from .app import (FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, only_formats, option_errors, usage_error,
-                  warn)
+from ..io import all_or_none, check_not_input
+from .app import (FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, only_formats, option_errors, reading,
+                  usage_error, warn)
 
 
 class ZeroMode(str, Enum):
@@ -202,12 +202,14 @@ def import_(
         zero=zero.value, flip_output=flip_output, resample=resample_hz, detrend=detrend,
         time_repair=time_repair.value, decimals=decimals, meta=meta_values)
 
-    # convert everything first: a bad file leaves no output at all
-    done = [importer.convert(p, mapping, options) for p in raw]
-    texts = [format_run(d.run) for d in done]
+    # convert everything first, then write all or none: a bad file leaves no output at all
+    done = []
+    for p in raw:
+        with reading(p, quiet) as progress:
+            done.append(importer.convert(p, mapping, options, progress=progress))
     with all_or_none() as pending:
-        for dst, text in zip(targets, texts):
-            pending.write_text(dst, text, inputs=raw)
+        for dst, d in zip(targets, done):
+            pending.write_run(dst, d.run, inputs=raw)
 
     if fmt == OutputFormat.json:
         echo_json([dict(d.report.to_dict(), output=str(dst), meta=dict(d.run.meta)) for d, dst in zip(done, targets)])

@@ -11,7 +11,8 @@ from .app import (ColumnsOpt, CurrentSign, FormatOpt, ModelOpt, OutOpt, OutputFo
                   columns_mapping, command, distinct_outputs, echo_json, echo_table, info, load_run, one_of,
                   option_errors, prints, usage_error, warn)
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
-from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, TravelLimitOpt, limit_hint, limits)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, StrictSpeedOpt, TravelLimitOpt, limit_hint,
+                         limits, speed_mode)
 
 InputArg = Annotated[Path, typer.Argument(metavar="RUN.csv", help="Input run CSV.", show_default=False)]
 
@@ -51,7 +52,6 @@ def identify_cmd(
     from dataclasses import replace
 
     from .. import io
-    from ..identify import identify, plot_identification
     from ..model import Geometry
     from ..settings import Settings
 
@@ -74,6 +74,10 @@ def identify_cmd(
     settings = Settings(level=level, current_sign=current_sign.value)
     with about(sweep):
         run = load_run(sweep, mapping, quiet=quiet)
+        # the fit's libraries (scipy, numba) load only once the file is known to be good: a bad
+        # file's error line comes in the time the command line itself takes to start
+        from ..identify import identify, plot_identification
+
         result = identify(run, omega=omega, use_tip=not current_only, settings=settings)
     for fit in result.fits.values():
         for w in fit.warnings:
@@ -134,7 +138,7 @@ def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -
 
 @command("compensate", "Turn desired tip angles into knob commands",
          epilog="Example: hyst compensate sample_data/reference_periodic.csv --model "
-                "shifted.json -o commands.csv --allow-fast")
+                "shifted.json -o commands.csv")
 def compensate_cmd(
     trajectory: Annotated[Path, typer.Argument(help="Desired trajectory CSV with t and r1/r2.",
                                                show_default=False)],
@@ -146,6 +150,7 @@ def compensate_cmd(
     max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     max_accel: MaxAccelOpt = None,
     allow_fast: AllowFastOpt = False,
+    strict_speed: StrictSpeedOpt = False,
     columns: ColumnsOpt = None,
     fmt: FormatOpt = OutputFormat.table,
     quiet: QuietOpt = False,
@@ -153,29 +158,31 @@ def compensate_cmd(
     """Turn desired tip angles r1/r2 into knob commands q1/q2 through the inverse model.
 
     Keeps t, r and the metadata; sets `controller` (comp or comp+shift) and the offsets used.
-    Reports each knob's range, peak speed and peak acceleration, and refuses (writes nothing,
-    exit 1) commands beyond --travel-limit, or beyond --max-speed (--max-accel) unless
-    --allow-fast: where the tip must cross a flat part of the loop (the dead zone, the
-    backlash at a reversal) the inverse model jumps across it within one sample, which a motor
-    cannot follow at the file's timing.
+    Where the tip must cross a flat part of the loop (the dead zone, the backlash at a reversal)
+    the exact inverse jumps across it within one sample, faster than --max-speed: such a step is
+    rate-limited (the knob crosses it at the limit and catches up with the exact inverse after
+    it) and a warning says how long the knob lags and how far that moves the tip on the model.
+    --allow-fast writes the exact inverse, jumps included; --strict-speed refuses (writes
+    nothing, exit 1). Commands beyond --travel-limit are always refused. Reports each knob's
+    range, peak speed and peak acceleration of what it writes.
     """
     from .. import compensation, io
-    from ..safety import LimitExceeded, check_motion, require_within
+    from ..safety import LimitExceeded
 
+    mode = speed_mode(allow_fast, strict_speed)
     io.check_not_input(output, [trajectory, model_path])
     mapping = columns_mapping(columns)
     model = io.load_model(model_path)
     traj = load_run(trajectory, mapping, quiet=quiet)
-    result = compensation.compensate(model, traj, ignore_shift=ignore_shift)
     # checked before anything is written: a refused file never exists
-    check = check_motion(result.run, limits(travel_limit, max_speed, max_accel), name=str(output))
     try:
-        require_within(check, allow=("speed", "accel") if allow_fast else (), name=str(output),
-                       action="write")
+        result = compensation.compensate(model, traj, ignore_shift=ignore_shift, speed=mode, name=str(output),
+                                         limits=limits(travel_limit, max_speed, max_accel))
     except LimitExceeded as exc:
         raise type(exc)(f"{exc}{limit_hint(exc)}", exc.check) from None
     for w in result.warnings:
         warn(w)
+    check = result.sent
     for v in check.violations:  # only what --allow-fast let through
         warn(f"{v.message}: written as asked (--allow-fast)")
     io.write_run(output, result.run, inputs=[trajectory, model_path])
@@ -184,7 +191,9 @@ def compensate_cmd(
     if fmt == OutputFormat.json:
         echo_json({"output": str(output), "controller": result.run.meta["controller"],
                    "offsets": {str(k): o for k, o in result.offsets.items()},
-                   "warnings": list(result.warnings), **check.to_dict()})
+                   "warnings": list(result.warnings), "speed": mode,
+                   "rate_limited": {str(k): c.to_dict() for k, c in result.catch_ups.items()},
+                   **check.to_dict()})
     elif fmt != OutputFormat.table:
         echo_table(_motion_table(check, result.offsets), fmt)
     elif not quiet:
@@ -198,7 +207,8 @@ def compensate_cmd(
         typer.echo(f"(deg, deg/s, deg/s^2, s; limits: travel +-{lim.travel:g} deg, speed "
                    f"{lim.max_speed:g} deg/s"
                    + (f", acceleration {lim.max_accel:g} deg/s^2" if lim.max_accel is not None else "")
-                   + ("; within them)" if check.ok else "; beyond them, written with --allow-fast)"))
+                   + ("; beyond them, written with --allow-fast)" if not check.ok else
+                      "; within them after rate-limiting)" if result.catch_ups else "; within them)"))
 
 
 def _motion_table(check, offsets):  # noqa: ANN001, ANN202 - safety.MotionCheck, {knob: offset} -> metrics.Table

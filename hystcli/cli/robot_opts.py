@@ -1,7 +1,8 @@
 """Options shared by the commands that talk to a robot or write what it will play.
 
-``play``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate`` declare their
-limits and reply deadline from here, so that one option means one thing
+``play``, ``track``, ``home``, ``jog``, ``status``, ``detect-shift --port`` and ``compensate``
+declare their limits, what to do with a step beyond the speed limit and their reply deadline from
+here, so that one option means one thing
 (and has one default, with its reason) everywhere. Every number is checked when parsed: a
 non-finite or non-positive value is a usage error (exit 2), never a traceback or a silently
 ignored limit (``nan`` passes a plain ``min=`` bound).
@@ -49,17 +50,23 @@ InverseMaxSpeedOpt = Annotated[float, typer.Option(
     help="Largest knob speed between samples, deg/s. The default is one knob turn a second: the "
          "paper's motions need at most 40 and a geared knob motor does a few hundred, while the "
          "inverse model's jump across the dead zone or the backlash asks for up to ~40 deg within "
-         "one sample (3942 deg/s at 100 Hz). A robot that announces a lower top speed gets its "
-         "own.")]
+         "one sample (3942 deg/s at 100 Hz): such a step is crossed at this speed. A robot that "
+         "announces a lower top speed gets its own.")]
 """``--max-speed`` of the commands that play the inverse model's commands (compensate, track, play),
-whose help says why they may exceed it."""
+whose help says what becomes of a faster step."""
 MaxAccelOpt = Annotated[Optional[float], typer.Option(
     "--max-accel", callback=positive,
     help="Largest knob acceleration, deg/s^2 (default: reported, not limited).")]
 AllowFastOpt = Annotated[bool, typer.Option(
     "--allow-fast",
-    help="Accept steps beyond --max-speed (and --max-accel): `play` sends them at the speed "
-         "limit (the knob arrives late), `compensate` writes them. Travel is never waived.")]
+    help="Keep steps beyond --max-speed (and --max-accel) as they are: `compensate` writes the "
+         "exact inverse, jumps included; `play` and `track` send them at the speed limit (the knob "
+         "arrives late). By default such steps are rate-limited: the knob crosses them at the "
+         "limit and catches up, and a warning says how long it lags. Travel is never waived.")]
+StrictSpeedOpt = Annotated[bool, typer.Option(
+    "--strict-speed",
+    help="Refuse (write or move nothing) when a step is beyond --max-speed (or --max-accel) "
+         "instead of rate-limiting it.")]
 NoReturnOpt = Annotated[bool, typer.Option(
     "--no-return", help="On a fault or Ctrl-C, hold the knobs where they stopped instead of "
                         "returning them to where they began.")]
@@ -73,6 +80,14 @@ def limits(travel_limit: float, max_speed: float, max_accel: float | None = None
     return Limits(travel_limit, max_speed, max_accel)
 
 
+def speed_mode(allow_fast: bool, strict_speed: bool) -> str:
+    """The :data:`~hystcli.safety.SPEED_MODES` entry the flags ask for (both: a usage error)."""
+    if allow_fast and strict_speed:
+        raise typer.BadParameter("--allow-fast keeps fast steps, --strict-speed refuses them: give one",
+                                 param_hint="--allow-fast / --strict-speed")
+    return "fast" if allow_fast else "strict" if strict_speed else "limit"
+
+
 def limit_hint(exc: Exception) -> str:
     """What to change when a trajectory is refused by a limit (``LimitExceeded``)."""
     check = getattr(exc, "check", None)
@@ -81,5 +96,6 @@ def limit_hint(exc: Exception) -> str:
     first = check.violations[0].limit if check.violations else ""
     if first == "travel":
         return "; raise --travel-limit only if the robot's knob allows it"
-    return ("; --allow-fast accepts it (the knob then moves at the speed limit and arrives late), "
-            "or raise --max-speed/--max-accel if the robot allows it")
+    return ("; without --strict-speed such steps are rate-limited (the knob crosses them at the limit "
+            "and catches up), --allow-fast keeps them, or raise --max-speed/--max-accel if the robot "
+            "allows it")

@@ -17,8 +17,9 @@ import typer
 from ..errors import DataError
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .app import (BaudOpt, ColumnsOpt, ModelOpt, OutOpt, QuietOpt, columns_mapping, command, fail, info, load_run,
-                  stderr_is_tty)
-from .robot_opts import AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, TimeoutOpt, TravelLimitOpt, limit_hint, limits
+                  stderr_is_tty, warn)
+from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, NoReturnOpt, StrictSpeedOpt, TimeoutOpt, TravelLimitOpt,
+                         limit_hint, limits, speed_mode)
 
 
 class LatencyMode(str, Enum):
@@ -28,7 +29,7 @@ class LatencyMode(str, Enum):
 
 @command("track", "Compensate a reference live and play it on the robot",
          epilog="Example: hyst track sample_data/reference_periodic.csv --port /dev/ttyUSB0 "
-                         "--model shifted.json -o run.csv --allow-fast\n\n"
+                         "--model shifted.json -o run.csv\n\n"
                          "         my_planner | hyst track - --port /dev/ttyUSB0 --model shifted.json "
                          "-o run.csv --detect-shift-first")
 def track_cmd(
@@ -53,6 +54,7 @@ def track_cmd(
     travel_limit: TravelLimitOpt = DEFAULT_TRAVEL,
     max_speed: InverseMaxSpeedOpt = DEFAULT_MAX_SPEED,
     allow_fast: AllowFastOpt = False,
+    strict_speed: StrictSpeedOpt = False,
     no_return: NoReturnOpt = False,
     columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
@@ -63,7 +65,10 @@ def track_cmd(
     effects, one sample at a time) and out as a MOVE at the reference's timing; the log
     (t, r, q, c, and y when the robot has a tracker) is written to --output for `hyst evaluate`.
     A reference file is compensated and checked against --travel-limit and --max-speed before the
-    first MOVE; one from stdin is checked sample by sample. On any fault or Ctrl-C every motor
+    first MOVE; one from stdin is checked sample by sample. A step beyond --max-speed (the
+    inverse's jump across the dead zone or the backlash) is rate-limited as it comes (the knob
+    catches up after it; a warning says how long it lagged), sent at the limit with
+    --allow-fast, or refused with --strict-speed. On any fault or Ctrl-C every motor
     stops, the knobs return to where they began (--no-return: they hold), the error says where
     each knob is, and nothing is written.
     """
@@ -73,6 +78,7 @@ def track_cmd(
     from ..safety import LimitExceeded
     from ..tracking import reference_from_lines, reference_from_run, track
 
+    mode = speed_mode(allow_fast, strict_speed)
     inputs = [model_path] + ([] if reference == "-" else [Path(reference)])
     io.check_not_input(output, inputs)
     folder = output.parent if str(output.parent) else Path(".")
@@ -102,7 +108,7 @@ def track_cmd(
              f"{','.join(map(str, device.info.knobs))}, tracker {'yes' if device.info.tracker else 'no'})",
              quiet)
         try:
-            result = track(device, model, ref, limits=lim, allow_fast=allow_fast, paced=not fast,
+            result = track(device, model, ref, limits=lim, speed=mode, paced=not fast,
                            latency=latency.value, detect_shift_first=detect_shift_first,
                            return_on_abort=not no_return, progress=progress)
         except LimitExceeded as exc:
@@ -113,6 +119,8 @@ def track_cmd(
     io.write_run(output, run, inputs=inputs)
     if tty and len(run) >= 100:
         typer.echo("", err=True)
+    for c in result.catch_ups.values():
+        warn(c.message)
     parts = [f"{len(run)} samples", f"max lag {run.meta['track_max_lag_s']} s",
              f"compensator {result.step_us:.1f} us/step"]
     for k, o in result.offsets.items():
