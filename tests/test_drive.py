@@ -55,8 +55,13 @@ def test_a_delay_after_the_tendons_leaves_the_current_on_time(cs, name):
     r = D.tip_behind_current(model, sweep)
     assert r is not None
     delay = e.params.get("delay", e.params.get("tau"))
-    # (a long first-order lag has not reached its steady trail tau x speed by the edge: 0.6 of it)
-    assert 0.5 * delay < r.delay < 2.0 * delay
+    # A pure latency trails by its delay. A first-order lag reaches its steady trail tau x speed
+    # only after a few tau; the loop fit sees the tip's ramp from the edge to the reversal, which
+    # is about 2-3 tau here, and a line through t - tau (1 - exp(-t / tau)) over 2-3 tau crosses
+    # zero at 0.27-0.37 tau. So the bound that matters is the contrast with a lag in the drive,
+    # whose tip is within 0.2 tau of the current (the test above): here the tip trails by more
+    # than 0.35 of the delay.
+    assert 0.35 * delay < r.delay < 2.0 * delay
 
 
 @pytest.mark.slow
