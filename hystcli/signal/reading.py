@@ -593,10 +593,11 @@ def _take_up_stretches(stretches, d, sign, z, settings) -> list[StretchReading]:
     over a dead piece the other direction finds slack too, and begun at a reversal (the record's
     first stretch starts from a state the record cannot tell: a tip held above its plateau is
     taken up early; it stands in only where no other shows the edge, and then fixes nothing)."""
-    seen = _confirmed(_at_no_load([s for s in stretches if s.direction == d and math.isfinite(s.edge_at)],
-                                  sign, z, settings.max_edge_gap),
+    # the first stretch is set aside before the no-load level is read: its unknown start state
+    # would otherwise set the level the others are judged by
+    cands = [s for s in stretches if s.direction == d and math.isfinite(s.edge_at)]
+    return _confirmed(_at_no_load([s for s in cands if s.from_reversal] or cands, sign, z, settings.max_edge_gap),
                       [s for s in stretches if s.direction == -d and math.isfinite(s.edge_at)])
-    return [s for s in seen if s.from_reversal] or seen
 
 
 def _side_edge(mine, side, d, sign, z, settings):  # noqa: ANN001, ANN202
