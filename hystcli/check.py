@@ -23,7 +23,10 @@ The physical checks read the data as identify does (:mod:`hystcli.signal`):
 - a sweep that never passes an edge: on no monotone stretch of the knob does a continuous broken
   line of two pieces beat one line by BIC (:func:`hystcli.signal.pwl.fit_piecewise`, which counts
   the residuals' autocorrelation): the current's slope never changes along the knob, so no
-  dead-zone edge can be read from it.
+  dead-zone edge can be read from it;
+- units that look wrong: a knob whose moving speed is under :data:`MIN_KNOB_SPEED` deg/s (a time
+  column in milliseconds read as seconds turns a 40 deg/s sweep into 0.04 deg/s), or a motor current
+  whose whole range is under :data:`MIN_CURRENT_RANGE` mA (a current in amperes read as mA).
 
 The core never imports typer or rich; nothing here writes.
 """
@@ -63,6 +66,14 @@ MIN_STRETCH_POINTS = 30
 EDGE_TEST_POINTS = 2000
 """Most samples of one monotone stretch the slope-change fit reads (evenly spaced; the fit counts
 the residuals' autocorrelation, so thinning costs precision, not honesty)."""
+
+
+#: deg/s. The slowest knob speed taken at face value: catheter sweeps run at 1-360 deg/s (the
+#: paper's at 40 deg/s); a knob that moves slower than this is most likely timed in ms, not s.
+MIN_KNOB_SPEED = 0.5
+#: mA. The smallest range of a motor current taken at face value: a tendon drive's current moves
+#: by tens of mA between slack and loaded; a smaller range is most likely a current in A.
+MIN_CURRENT_RANGE = 1.0
 
 
 @dataclass(frozen=True)
@@ -317,7 +328,32 @@ def _physical(cols: Mapping[str, np.ndarray], current_sign: str) -> list[Problem
         out.append(Problem(ERROR, "/".join(f"q{k}" for k in knobs),
                            "no knob moves: there is nothing to identify or detect"))
     for k in moving:
-        out += _knob_problems(cols, k, current_sign)
+        out += _knob_problems(cols, k, current_sign) + _unit_problems(cols, k)
+    return out
+
+
+def _unit_problems(cols: Mapping[str, np.ndarray], k: int) -> list[Problem]:
+    """A knob speed or a current range too small for the units a run CSV uses (s, mA)."""
+    out = []
+    q = cols[f"q{k}"]
+    if "t" in cols:
+        ok = np.isfinite(q) & np.isfinite(cols["t"])
+        if ok.sum() >= MIN_ROWS:
+            t, qk = cols["t"][ok], q[ok]
+            dt = np.diff(t)
+            good = dt > 0
+            speed = np.abs(np.diff(qk)[good] / dt[good])
+            moving = speed[speed > 0]
+            if moving.size and float(np.median(moving)) < MIN_KNOB_SPEED:
+                out.append(Problem(WARNING, "t", f"knob {k} moves at {float(np.median(moving)):.3g} deg/s (median "
+                                                 f"while moving), slower than any sweep: is t in milliseconds? "
+                                                 "name its unit, e.g. --columns t=time_ms:ms"))
+    c_name = f"c{k}"
+    if c_name in cols:
+        c = cols[c_name][np.isfinite(cols[c_name])]
+        if c.size >= MIN_ROWS and float(np.ptp(c)) < MIN_CURRENT_RANGE:
+            out.append(Problem(WARNING, c_name, f"the motor current spans only {float(np.ptp(c)):.3g} mA: is it in "
+                                                f"amperes? name its unit, e.g. --columns {c_name}=current:A"))
     return out
 
 

@@ -295,10 +295,10 @@ def _parse_head(lines: list[str], source: str, require: Iterable[str]) -> tuple[
             if len(fields) > 1:
                 # Excel in many locales writes ';': say exactly how to convert the file
                 spec = ",".join(f"{f}={j + 1}" for j, f in enumerate(fields) if f in KNOWN_COLUMNS)
-                raise DataError(f"{source}: the header has no commas but {len(fields)} fields separated by "
-                                f"{name}; a run CSV is comma-separated: convert it with `hyst import "
-                                f"{source} --sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} "
-                                f"-o converted.csv`")
+                raise DataError(f"{source}: the header has {len(fields)} fields separated by {name}, not commas: "
+                                f"name its columns with --columns (then any delimiter is read), e.g. "
+                                f"--columns t=NAME,q1=NAME,... , or convert it once with `hyst import {source} "
+                                f"--sep {option} --skip {i + 1} --map {spec or 't=1,q1=2,...'} -o converted.csv`")
     if any(h == "" for h in header):
         raise DataError(f"{source}: header row has an empty column name")
     if len(set(header)) != len(header):

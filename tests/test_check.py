@@ -117,6 +117,18 @@ def test_physical_problems_of_a_sweep(sweep):
     assert "20.0 % jitter" in check_run(cases["jitter"])[0].message
 
 
+def test_units_left_off_are_warned(sweep):
+    # a log in ms and A read as s and mA: the 40 deg/s sweep turns at 0.04 deg/s, and a current of
+    # about 125 mA reads 0.125 (the sample sweep's own figures)
+    t, q, y, c = (sweep[n] for n in ("t", "q1", "y1", "c1"))
+    ms = [(p.where, p.message) for p in check_run(Run({"t": 1000.0 * t, "q1": q, "y1": y, "c1": c}))]
+    assert [w for w, _ in ms] == ["t"] and "is t in milliseconds?" in ms[0][1] and ":ms" in ms[0][1]
+    amps = [(p.where, p.message) for p in check_run(Run({"t": t, "q1": q, "y1": y, "c1": c / 1000.0}))]
+    assert [w for w, _ in amps] == ["c1"] and "in amperes?" in amps[0][1]
+    # the same figures with their units named are clean (the unit conversion of --columns)
+    assert check_run(Run({"t": t, "q1": q, "y1": y, "c1": c})) == ()
+
+
 def test_an_edge_is_a_slope_change_and_noise_is_none():
     rng = np.random.default_rng(11)
     q = np.concatenate([np.linspace(-20, 20, 400), np.linspace(20, -20, 400)])

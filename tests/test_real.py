@@ -113,3 +113,22 @@ def test_real_study_donors_never_read_a_held_out_file():
             assert all(d.cond.table == "load" for d in loads)
         else:
             assert loads == []  # load_freq is one session: no other session lends to it
+
+
+# --------------------------------------------------------------------------------------------
+# every real log we ship gives a model (no flags), and it beats a static line through the record
+# --------------------------------------------------------------------------------------------
+REAL = Path(__file__).parents[1] / "sample_data" / "real"
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("path", sorted(REAL.rglob("*.csv")), ids=lambda p: str(p.relative_to(REAL)))
+def test_every_real_log_gives_a_model_that_beats_a_static_line(path):
+    from hystcli.io import read_run
+
+    run = read_run(path)
+    fit = identify(run).fits[1]
+    q, y = np.asarray(run["q1"], float), np.asarray(run["y1"], float)
+    line = np.polyval(np.polyfit(q, y, 1), q) - y
+    ours = fit.model.forward(q, float(y[0])) - y
+    assert _rmse(ours) < _rmse(line), (_rmse(ours), _rmse(line))

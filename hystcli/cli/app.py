@@ -272,7 +272,7 @@ EffectOpt = Annotated[Optional[List[str]], typer.Option(
 
 
 ColumnsOpt = Annotated[Optional[str], typer.Option(
-    "--columns", metavar="t=NAME,q1=NAME[:UNIT],...",
+    "--columns", metavar="t=NAME[:UNIT],q1=NAME[:UNIT],...",
     help="Read your own CSV: which of its columns (by header name, or number from 1) is t, q1, y1, "
          "c1, ..., each with an optional unit (ms, rad, A, ...) or scale. Any separator; # and % "
          "lines are comments. The syntax of `hyst import --map`.", show_default=False)]

@@ -103,7 +103,7 @@ def identify_cmd(
                             "cogging": _cogging(result, k), "unfixed": list(f.unfixed)}
                    for k, f in result.fits.items()})
     elif fmt == OutputFormat.table:
-        typer.echo(result.summary())
+        typer.echo(result.summary(warnings=False))  # warn() has printed them on stderr
     else:
         echo_table(_identify_table(result), fmt)
     written = [str(p) for p in (output, plot) if p is not None]

@@ -86,13 +86,14 @@ class KnobFit:
         """Parameters the record does not fix."""
         return tuple(n for n, e in self.estimates.items() if not e.fixed)
 
-    def summary(self) -> str:
-        """A few lines: method, RMSE, each parameter with its interval, the warnings."""
+    def summary(self, warnings: bool = True) -> str:
+        """A few lines: method, RMSE, each parameter with its interval, the warnings (unless
+        ``warnings`` is False: the CLI prints them once, on stderr)."""
         head = f"knob {self.knob} ({self.method}" + (f", RMSE {self.rmse:.3f} deg" if self.rmse is not None else "") + ")"
         lines = [head]
         for name, e in self.estimates.items():
             lines.append("  " + e.describe(name, unit="" if name == "omega" else "deg", digits=3 if name == "omega" else 2))
-        lines += [f"  warning: {w}" for w in self.warnings]
+        lines += [f"  warning: {w}" for w in self.warnings] if warnings else []
         return "\n".join(lines)
 
 
@@ -103,8 +104,9 @@ class Identification:
     fits: dict[int, KnobFit]
     model: Model
 
-    def summary(self) -> str:
-        return "\n".join(f.summary() for f in self.fits.values())
+    def summary(self, warnings: bool = True) -> str:
+        """Each knob's :meth:`KnobFit.summary`."""
+        return "\n".join(f.summary(warnings) for f in self.fits.values())
 
     @property
     def intervals(self) -> dict[int, dict[str, Estimate]]:
@@ -226,8 +228,8 @@ def _tip_path(q: np.ndarray, y: np.ndarray, t: np.ndarray, chk: SweepCheck, sett
     rms, departs = systematic_misfit(resid, fs, fit.tau, fit.noise, settings.level)
     if departs:
         warnings.append(f"{where}: the tip departs from the dead-zone + backlash loop by {rms:.2f} deg RMS over "
-                        f"quarter seconds, more than the tracker's noise ({fit.noise:.2f} deg) explains: the model "
-                        "predicts the record as well as a loop can; run hyst diagnose to find what the loop leaves out")
+                        f"quarter seconds, more than the tracker's noise ({fit.noise:.2f} deg) explains; no dead-zone + backlash "
+                        "loop fits the record better, so this one is kept: run hyst diagnose to find what it leaves out")
     bottom, top = fit.walls
     if bottom is not None or top is not None:
         at = " and ".join(f"{lvl:+.2f} deg" for lvl in (bottom, top) if lvl is not None)

@@ -162,7 +162,8 @@ def _judged(name: str, e: Estimate, max_halfwidth: float, span: float) -> Estima
     if e.halfwidth * scale <= max_halfwidth:
         return e
     unit = "" if name == "omega" else " deg"
-    return replace(e, fixed=False, reason=f"the record bounds it only to [{e.lo:.2f}, {e.hi:.2f}]{unit}")
+    return replace(e, fixed=False, reason=(f"the record bounds it only to [{e.lo:.2f}, {e.hi:.2f}]{unit}, across "
+                                           f"which the predicted tip moves by more than {max_halfwidth:g} deg"))
 
 
 class _Better(Exception):
