@@ -53,11 +53,13 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .core import kernel as core_kernel
+from .core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
 from .effects import chain, kernels
 from .effects.base import Effect, Signals
 from .effects.registry import as_effects
 from .errors import DataError, ModelError
-from .model import KnobModel, Model, Shape, _inverse_py, _kernel
+from .model import KnobModel, Model, Shape
 from .safety import CatchUp, Limits, RateLimiter
 
 LATENCY_MODES = ("delay", "ignore")
@@ -65,8 +67,8 @@ LATENCY_MODES = ("delay", "ignore")
 
 
 class _Hysteresis:
-    """The hysteresis inverse of docs/design.md section 3, one sample at a time (``_inverse_py`` and
-    ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
+    """The hysteresis inverse of docs/design.md section 3, one sample at a time (:func:`hystcli.core.kernel.inverse_step`
+    on plain floats, as ``inverse_edges_kernel`` of the batch path runs it)."""
 
     __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
                  "y", "x", "fresh", "y0", "edges", "outputs", "k", "widen", "speed", "lead", "warnings", "tau")
@@ -135,25 +137,9 @@ class _Hysteresis:
             far_pos = far_pos + g
             far_neg = far_neg - g
         xp = self.x
-        if r > y:
-            near = self.d_pos + b
-            h = self.h_pos
-            if far_pos > near and h + self.omega * (near - far_pos) < r <= h + self.omega * (far_pos - near):
-                self.x = 0.5 * (far_pos + near + (r - h) / self.omega) + self.offset
-            elif r > h:
-                self.x = near + (r - h) / self.omega + self.offset
-            else:
-                self.x = far_pos + (r - h) / self.omega + self.offset
-            self.y = r
-        elif r < y:
-            near = self.d_neg + a
-            h = self.h_neg
-            if far_neg < near and h + self.omega * (far_neg - near) <= r < h + self.omega * (near - far_neg):
-                self.x = 0.5 * (far_neg + near + (r - h) / self.omega) + self.offset
-            elif r < h:
-                self.x = near + (r - h) / self.omega + self.offset
-            else:
-                self.x = far_neg + (r - h) / self.omega + self.offset
+        self.x = _inverse_step(r, y, xp, self.d_pos + b, far_pos, self.d_neg + a, far_neg, self.omega,
+                               self.h_pos, self.h_neg, self.offset, True)
+        if r > y or r < y:  # not NaN: the batch kernel holds y on it
             self.y = r
         if self.widen != 0.0:
             x = self.x
@@ -161,11 +147,9 @@ class _Hysteresis:
                 # kernels.inverse_edges_kernel's lead limit, the same operations
                 x = self.x = xp + self.lead if x > xp else xp - self.lead
                 u = x - self.offset
-                lo = self.h_pos + self.omega * (min(u - far_pos, 0.0) + max(u - self.d_pos - b, 0.0))
-                hi = self.h_neg + self.omega * (min(u - self.d_neg - a, 0.0) + max(u - far_neg, 0.0))
-                y = lo if y < lo else y
-                y = hi if y > hi else y
-                self.y = y
+                lo, hi = _envelopes(u - far_pos, u - self.d_pos - b, u - self.d_neg - a, u - far_neg,
+                                    self.omega, self.h_pos, self.h_neg)
+                self.y = _clamp(y, lo, hi)
                 if self.warnings is not None:
                     self.warnings.append(chain._lead_warning(self.k, self.widen, self.lead))
             self.speed.step(self.x, t)
@@ -180,13 +164,13 @@ class _Hysteresis:
 
     @property
     def plain(self) -> bool:
-        """True when the compiled kernel of :mod:`hystcli.model` gives this stage's numbers."""
+        """True when the compiled :func:`hystcli.core.kernel.inverse` gives this stage's numbers."""
         return not self.edges and self.widen == 0.0
 
 
 class _Bend:
-    """The forward hysteresis of docs/design.md section 3 one sample at a time (``_forward_py``: the
-    same operations): a knob's bend as its base model predicts it, what the other knob's
+    """The forward hysteresis of docs/design.md section 3 one sample at a time (:mod:`hystcli.core.kernel`'s
+    envelopes and clamp on plain floats): a knob's bend as its base model predicts it, what the other knob's
     magnitude coupling reads (:mod:`hystcli.effects.coupling`)."""
 
     __slots__ = ("kn", "y")
@@ -201,14 +185,8 @@ class _Bend:
     def step(self, q: float, t: float = 0.0) -> float:
         offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg = self.kn._kernel_args()
         u = q - offset
-        lo = h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
-        hi = h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
-        y = self.y
-        if y < lo:
-            y = lo
-        if y > hi:
-            y = hi
-        self.y = y
+        lo, hi = _envelopes(u - dhat_pos, u - d_pos, u - d_neg, u - dhat_neg, omega, h_pos, h_neg)
+        self.y = y = _clamp(self.y, lo, hi)
         return y
 
     def save(self) -> float:
@@ -833,14 +811,14 @@ class Compensator:
             ch = self._chains[self._knobs[0]]
             timed = tt is not None or self.dt is not None or self._limiters is None
             if not ch.tail and ch.head == [ch.hyst] and ch.hyst.plain and timed and np.all(np.isfinite(rr)):
-                # the compiled kernel of hystcli.model: the same operations, so the same numbers
+                # the compiled kernel of hystcli.core.kernel: the same operations, so the same numbers
                 if tt is not None:
                     self._check_times(tt)
                 h = ch.hyst
                 if h.fresh:
                     h._start(None)
                 out = np.empty_like(rr)
-                h.y = float(_kernel(_inverse_py)(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
+                h.y = float(core_kernel.inverse(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
                 h.x = float(out[-1])
                 first = self._n
                 self._n += rr.size

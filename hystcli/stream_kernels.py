@@ -40,6 +40,8 @@ import math
 import numpy as np
 from numba import njit
 
+from .core import kernel
+
 COUPLE, UNLAG, HYST, LAG, BEND = 0, 1, 2, 3, 4
 """Op codes of the table (module notes)."""
 
@@ -125,29 +127,15 @@ def _run(lo, hi, z, t, other, has_other, ops, par, st, work):
                         half = 0.5 * par[q] * d
                         b += half
                         a += -half
-                if z > y:
-                    if z > h_pos:
-                        x = par[p + 1] + b + (z - h_pos) / omega + offset
-                    else:
-                        x = par[p + 3] + a + (z - h_pos) / omega + offset
-                else:
-                    if z < h_neg:
-                        x = par[p + 2] + a + (z - h_neg) / omega + offset
-                    else:
-                        x = par[p + 4] + b + (z - h_neg) / omega + offset
+                x = kernel.inverse_step(z, y, x, par[p + 1] + b, par[p + 3] + a, par[p + 2] + a, par[p + 4] + b,
+                                        omega, h_pos, h_neg, offset, False)
                 y = z
             work[s] = y
             work[s + 1] = x
             z = x
         elif code == 4:  # BEND
-            u = z - par[p]
-            lo = par[p + 6] + par[p + 5] * (min(u - par[p + 3], 0.0) + max(u - par[p + 1], 0.0))
-            hi = par[p + 7] + par[p + 5] * (min(u - par[p + 2], 0.0) + max(u - par[p + 4], 0.0))
-            y = st[s]
-            if y < lo:
-                y = lo
-            if y > hi:
-                y = hi
+            y = kernel.forward_step(st[s], z - par[p], par[p + 1], par[p + 2], par[p + 3], par[p + 4], par[p + 5],
+                                    par[p + 6], par[p + 7])
             work[s] = y
             z = y
         else:  # LAG

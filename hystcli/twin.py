@@ -40,6 +40,7 @@ from numba import njit
 
 from scipy import signal
 
+from .core import kernel
 from .effects import (ChainState, Effect, as_effects, contact_current, format_effects, tip_chain)
 from .errors import DataError, ModelError
 from .filters import butter_sos, lowpass
@@ -229,9 +230,7 @@ def _loads(u, d_pos, d_neg, b_pos, b_neg, omega, h_pos, h_neg, st, out):
     y, prev, lp, ln, lp0, yp0, ln0, yn0 = st[0], st[1], st[2], st[3], st[4], st[5], st[6], st[7]
     for i in range(u.shape[0]):
         x = u[i]
-        up = h_pos + omega * (min(x - dhat_pos, 0.0) + max(x - d_pos, 0.0))
-        dn = h_neg + omega * (min(x - d_neg, 0.0) + max(x - dhat_neg, 0.0))
-        y_new = min(max(y, up), dn)
+        y_new = kernel.forward_step(y, x, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg)
         if x > prev:
             lp = max(lp, x - d_pos)
             lp0, yp0 = lp, y_new

@@ -46,6 +46,7 @@ from numba import njit
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
+from ..core import kernel
 from ..model import KnobModel
 from ..signal.pwl import autocorrelation_time
 from ..signal.stretches import decimation_index
@@ -71,18 +72,6 @@ _THETA = ("d_neg", "width", "f_pos", "f_neg", "delta", "omega", "h_mid", "z_init
 # --------------------------------------------------------------------------------------------
 # compiled kernels
 # --------------------------------------------------------------------------------------------
-@njit(cache=True, inline="always")
-def _clamp(z, u, dn, dp, dhp, dhn, half):
-    # one step of the clamp recursion (DESIGN.md section 3): z held unless an envelope at u pushes it
-    lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-    hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
-    if z < lo:
-        z = lo
-    if z > hi:
-        z = hi
-    return z
-
-
 @njit(cache=True)
 def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
     dhp = dn + bn - dh
@@ -91,7 +80,7 @@ def _z_kernel(q, dn, dp, bp, bn, dh, z_init, out):
     z = z_init
     for i in range(q.shape[0]):
         u = q[i]
-        z = _clamp(z, u, dn, dp, dhp, dhn, half)
+        z = kernel.unit_step(z, u, dn, dp, dhp, dhn, half)
         out[i] = z
 
 
@@ -126,8 +115,7 @@ def _batch_kernel(q, y, wt, side, lvl, cands, out):
         dhn = dp - bp + dh
         half = 0.5 * dh
         u0 = q[0]
-        lo0 = -half + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
-        hi0 = half + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
+        lo0, hi0 = kernel.unit_envelopes(u0, dn, dp, dhp, dhn, half)
         best = 1e300
         for s in range(3):
             if s == 0:
@@ -142,7 +130,7 @@ def _batch_kernel(q, y, wt, side, lvl, cands, out):
             szy = 0.0
             for i in range(q.shape[0]):
                 u = q[i]
-                z = _clamp(z, u, dn, dp, dhp, dhn, half)
+                z = kernel.unit_step(z, u, dn, dp, dhp, dhn, half)
                 sz += wt[i] * z
                 szz += wt[i] * z * z
                 szy += wt[i] * z * y[i]
@@ -159,7 +147,7 @@ def _batch_kernel(q, y, wt, side, lvl, cands, out):
                 z = z0
                 for i in range(q.shape[0]):
                     u = q[i]
-                    z = _clamp(z, u, dn, dp, dhp, dhn, half)
+                    z = kernel.unit_step(z, u, dn, dp, dhp, dhn, half)
                     if side[i] != 0.0:
                         short = side[i] * (lvl[i] - (a + w * z))
                         if short > 0.0:
@@ -190,10 +178,11 @@ def _z_jac_kernel(q, dn, w, fp, fn, dh, z_init, z_out, jac):
     g5 = 1.0
     for i in range(q.shape[0]):
         u = q[i]
-        lo = -half + min(u - dhp, 0.0) + max(u - dp, 0.0)
-        hi = half + min(u - dn, 0.0) + max(u - dhn, 0.0)
+        lo, hi = kernel.unit_envelopes(u, dn, dp, dhp, dhn, half)
+        # the derivative of kernel.clamp: the envelope that binds (the descending one where
+        # both do, as the clamp's order has it) gives its derivative, a held sample keeps its own
+        zl = lo if z < lo else z
         if z < lo:
-            z = lo
             # d lo = -d(dh)/2 - [u < dhp] d(dhp) - [u > dp] d(dp)
             g0 = 0.0
             g1 = 0.0
@@ -209,8 +198,7 @@ def _z_jac_kernel(q, dn, w, fp, fn, dh, z_init, z_out, jac):
                 g0 -= 1.0
                 g1 -= 1.0
             g5 = 0.0
-        if z > hi:
-            z = hi
+        if zl > hi:
             # d hi = d(dh)/2 - [u < dn] d(dn) - [u > dhn] d(dhn)
             g0 = 0.0
             g1 = 0.0
@@ -225,6 +213,7 @@ def _z_jac_kernel(q, dn, w, fp, fn, dh, z_init, z_out, jac):
                 g2 += s
                 g4 -= 1.0 - fp
             g5 = 0.0
+        z = kernel.clamp(z, lo, hi)
         z_out[i] = z
         jac[i, 0] = g0
         jac[i, 1] = g1
@@ -339,8 +328,7 @@ def _start_from_geometry(g, q: np.ndarray, y: np.ndarray, free: np.ndarray | Non
 def _initial_states(u0: float, g) -> tuple[float, float, float]:
     dn, dp, bp, bn, dh = map(float, g)
     dhp, dhn = dn + bn - dh, dp - bp + dh
-    lo = -0.5 * dh + min(u0 - dhp, 0.0) + max(u0 - dp, 0.0)
-    hi = 0.5 * dh + min(u0 - dn, 0.0) + max(u0 - dhn, 0.0)
+    lo, hi = kernel.unit_envelopes.py_func(u0, dn, dp, dhp, dhn, 0.5 * dh)  # -(0.5 dh) is -0.5 dh exactly
     return lo, hi, 0.5 * (lo + hi)
 
 
