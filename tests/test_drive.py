@@ -1,6 +1,6 @@
 """Where a delay sits (hystcli.drive): the sweep's motor current against its tip.
 
-The catheters are the independent zoo's (hystcli.zoo.catheters, written without reading
+The catheters are the independent zoo's (plants.zoo.catheters, written without reading
 hystcli.effects or hystcli.drive); the case seeds are the withheld suite's design seeds (92xxx).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ from hystcli import drive as D
 from hystcli.diagnose import diagnose
 from hystcli.identify import identify
 from hystcli.io import parse_run
-from hystcli.zoo import catheters as C
+from plants.zoo import catheters as C
 
 
 def _case(cs: int):

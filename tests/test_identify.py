@@ -3,7 +3,7 @@ interval (not a refusal) where the record cannot fix a parameter, walls, the cur
 and its refusal, the model file, the command line, sweep checks, determinism and the figure.
 
 References: the twin's true parameters (hystcli.twin's example catheters, the calibrated ice-a
-written out below), the independent plant zoo's truths (hystcli.zoo.plants), and currents and tips
+written out below), the independent plant zoo's truths (plants.zoo.plants), and currents and tips
 built in the tests; never an output of identify.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from hystcli.identify import check_sweep, find_reversals, identify, plot_identif
 from hystcli.io import Run, load_model, parse_run, read_run, save_model, write_run
 from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
 from hystcli.settings import DEFAULT
-from hystcli.zoo import plants
+from plants.zoo import plants
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEP = ROOT / "sample_data" / "ice-a" / "sweep_knob1.csv"

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import reference as R
-from hystcli.zoo import plants
+from plants.zoo import plants
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
 FORBIDDEN = ("hystcli.identify", "hystcli.shift", "hystcli.current", "hystcli.signal")

@@ -7,7 +7,6 @@ command that moves a knob checks the whole request against the limits of
 """
 from __future__ import annotations
 
-import math
 import signal
 import sys
 from pathlib import Path
@@ -66,11 +65,13 @@ def sim_robot_cmd(
     fault: Annotated[Optional[List[str]], typer.Option(
         "--fault", help="Inject a fault (tests): KIND@N[xCOUNT][=VALUE], KIND one of silent, garble, "
                         "close, error, spike, delay; N counts MOVE frames.")] = None,
-    zoo: Annotated[Optional[str], typer.Option(
-        "--zoo", metavar="SEED[:FAMILY[:OFFSET]]",
-        help="Serve an independent plant of hystcli.zoo.plants instead of the catheter (knob 1 only): "
-             "its seed, current-law family and the shift its shaft carries (deg). For tests of the "
-             "live path on a plant our code did not make.")] = None,
+    plant: Annotated[Optional[str], typer.Option(
+        "--plant", metavar="FILE.py[:ARGS]",
+        help="Serve a plant built by a Python file instead of the catheter (tests of the live path on "
+             "a plant our code did not make): FILE.py defines plant(args) returning the plant, ARGS "
+             "(the text after the first ':' following .py) passed as one string. The independent test "
+             "plants are not installed with hyst; the repository's bench/plants/live.py serves them: "
+             "--plant bench/plants/live.py:SEED[:FAMILY[:OFFSET]].")] = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Serve the virtual catheter as a robot on a pseudo-terminal until Ctrl-C or SIGTERM.
@@ -106,8 +107,8 @@ def sim_robot_cmd(
         faults = [Fault.parse(f) for f in fault or ()]
     except HystError as exc:
         raise _usage("--fault", exc) from None
-    if zoo is not None:
-        twin = _zoo_plant(zoo)
+    if plant is not None:
+        twin = _file_plant(plant)
     else:
         twin = LiveTwin(cath, shape=shp, rotation=rotation, effects=effs, seed=seed, knobs=knob_list)
     server = serve(twin, latency=latency_ms / 1000.0, faults=faults, name=name,
@@ -122,7 +123,7 @@ def sim_robot_cmd(
         # a client may connect and start moving at once
         sys.stdout.write(server.path + "\n")
         sys.stdout.flush()
-        what = (f"zoo plant {zoo}" if zoo is not None else
+        what = (f"plant {plant}" if plant is not None else
                 f"{catheter} ({shp}, rotation {rotation:g} deg, effects {format_effects(twin.effects)})")
         info(f"serving {what} on {server.path}; Ctrl-C to stop", quiet)
         server.serve_forever()
@@ -135,23 +136,25 @@ def sim_robot_cmd(
         server.shutdown()
 
 
-def _zoo_plant(text: str) -> Any:
-    """The independent plant ``SEED[:FAMILY[:OFFSET]]`` of :mod:`hystcli.zoo.plants`, bent."""
-    from ..zoo import plants
+def _file_plant(text: str) -> Any:
+    """The plant ``plant(ARGS)`` of the Python file in ``FILE.py[:ARGS]`` builds."""
+    import importlib.util
 
-    parts = text.split(":")
+    path, sep, args = text.partition(".py:")
+    path = path + ".py" if sep else text
+    spec = importlib.util.spec_from_file_location("hyst_sim_plant", path) if Path(path).is_file() else None
+    if spec is None or not path.endswith(".py"):
+        raise typer.BadParameter(f"{path!r} is not a Python file (FILE.py[:ARGS])", param_hint="--plant")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    build = getattr(module, "plant", None)
+    if not callable(build):
+        raise typer.BadParameter(f"{path} defines no function plant(args)", param_hint="--plant")
     try:
-        seed = int(parts[0])
-        family = parts[1] if len(parts) > 1 and parts[1] else None
-        offset = float(parts[2]) if len(parts) > 2 else 0.0
-        if len(parts) > 3 or seed < 0 or not math.isfinite(offset) or (
-                family is not None and family not in plants.FAMILIES):
-            raise ValueError
-    except ValueError:
-        raise typer.BadParameter(f"{text!r}: expected SEED[:FAMILY[:OFFSET]], FAMILY one of "
-                                 f"{', '.join(plants.FAMILIES)}", param_hint="--zoo") from None
-    plant, _ = plants.live_plant(seed, family, offset=offset)
-    return plant
+        return build(args)
+    except ValueError as exc:
+        # the file's own refusal of its arguments is a usage error, as any option value's
+        raise typer.BadParameter(f"{args!r}: {exc}", param_hint="--plant") from None
 
 
 @command("sweep", "Write the identification sweep as commands for `play`",

@@ -1,6 +1,6 @@
 """One-knob test catheters ("plants") written from the physics alone.
 
-Nothing here imports the rest of :mod:`hystcli`; the plants were written from docs/design.md sections
+Nothing here imports :mod:`hystcli`; the plants were written from docs/design.md sections
 1-4 and 6 and the paper (section II equations, section III protocol).
 
 The tip

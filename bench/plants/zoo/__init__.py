@@ -3,7 +3,7 @@
 The code under test (identification, shift detection, the twin and its effects, diagnosis) must
 hold on catheters we did not build. The plants in this package were written from the physics of
 docs/design.md sections 2-4 and 6 and the paper, by authors who did not read that code, and they
-import nothing from the rest of :mod:`hystcli`. Tests and benches feed their records to the
+import nothing from :mod:`hystcli` (tests/test_plants_apart.py). Tests and benches feed their records to the
 commands exactly as a user's logs would be: as run CSV text.
 
 Modules
