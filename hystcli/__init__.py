@@ -15,6 +15,28 @@ The Python surface (docs/design.md section 9)::
 ``import hystcli`` loads only the error classes: every other name is imported on first use
 (module ``__getattr__``), so that ``hyst --help`` and a script that needs one function do not
 pay for numpy, pandas and numba up front.
+
+Layers
+------
+The package is cut in layers, :data:`LAYERS`, lowest first. A module imports only from its own
+layer or the ones below, never from a layer above, and no two modules import each other round a
+circle (tests/test_layers.py reads every import with ``ast`` and fails on either). The core
+imports neither typer, rich nor matplotlib.
+
+1. foundation: errors, estimates, settings, names, filters;
+2. signal: conditioning and reading the motor current;
+3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
+4. io: runs and models in files, the importer of foreign logs;
+5. effects: the effect chain around the hysteresis;
+6. use: prediction and compensation (batch and streaming), motion limits, tables and figures,
+   checks of a data set, the twin and its calibrated catheters;
+7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
+8. device: the robot protocol, driver, emulator and tracking;
+9. studies: the paper's experiment, batches of runs;
+10. cli: the command line (options, one library call, rendering).
+
+One arrow goes up, on purpose: ``Model.predict`` and ``Model.compensate`` (the design's
+``m.predict(run)``) import :mod:`hystcli.compensation` when called; :data:`LATE_IMPORTS` names it.
 """
 from __future__ import annotations
 
@@ -25,6 +47,25 @@ from .errors import (DataError, DeviceError, HystError, IdentificationError, Lin
                      SafetyStop, ShiftDetectionError)
 
 __version__ = "0.1.0"
+
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("errors", "estimate", "settings", "names", "filters"),
+    ("signal",),
+    ("core", "model"),
+    ("io", "importer"),
+    ("effects",),
+    ("compensation", "stream", "stream_kernels", "safety", "metrics", "inspection", "check", "twin",
+     "calibration"),
+    ("identify", "shift", "diagnose", "search", "attribution", "drive", "refit"),
+    ("device", "emulator", "robot", "tracking"),
+    ("experiment", "batch"),
+    ("cli", "__main__"),
+)
+"""The layers of the package, lowest first: each names the modules and subpackages directly under
+``hystcli`` that belong to it (the module notes)."""
+
+LATE_IMPORTS: frozenset[tuple[str, str]] = frozenset({("model", "compensation")})
+"""(importer, imported) pairs allowed to point up a layer, and only from inside a function."""
 
 # public name -> submodule that defines it (imported when the name is first asked for)
 _LAZY = {
