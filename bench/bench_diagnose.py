@@ -17,7 +17,7 @@ import time
 
 from hystcli import compensation, twin
 from hystcli.calibration import calibrated_catheter
-from hystcli.diagnose import diagnose
+from hystcli.diagnosis import diagnose
 from hystcli.io import Run
 from hystcli.model import Model, Shape
 

@@ -13,7 +13,7 @@ import math
 import time
 
 from hystcli import twin
-from hystcli.identify import identify
+from hystcli.identification import identify
 
 DURATION_S = 600.0
 FS = 1000.0

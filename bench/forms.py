@@ -14,7 +14,7 @@ import argparse
 import time
 
 from hystcli import effects as E, twin
-from hystcli.diagnose import diagnose
+from hystcli.diagnosis import diagnose
 
 from withheld import data_set
 

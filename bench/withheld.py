@@ -64,9 +64,9 @@ def heldout_index(n: int) -> list[int]:
 
 def run_case(seed: int, effects: tuple) -> dict:
     """Identify, diagnose and score one zoo case (a plain dict, for the process pool)."""
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.errors import HystError
-    from hystcli.identify import identify
+    from hystcli.identification import identify
     from hystcli.io import parse_run
     from plants.zoo import catheters as C
 

@@ -41,7 +41,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hystcli.errors import HystError  # noqa: E402
-from hystcli.identify import identify  # noqa: E402
+from hystcli.identification import identify  # noqa: E402
 from hystcli.io import parse_run  # noqa: E402
 from hystcli.shift import ReplayProbe, detect_shift  # noqa: E402
 

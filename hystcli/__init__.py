@@ -12,6 +12,15 @@ The Python surface (docs/design.md section 9)::
     c = hystcli.Compensator(m, dt=0.01)       # streaming, for a robot's own control loop
     q_t = c.step(r_t)                         # one sample in, one command out, causal
 
+    ident = hystcli.identify(sweep)           # -> Identification: .model, .intervals, .summary()
+    shift = hystcli.detect_shift(ident.model, replay, knob=1)  # -> ShiftResult (offset, interval)
+    comp = hystcli.compensate(model, reference)  # -> Compensation: .run, .warnings, .summary()
+    pred = hystcli.predict(model, run)        # -> Run, as Model.predict
+    report = hystcli.evaluate(runs)           # -> Evaluation: .groups, .summary()
+    diag = hystcli.diagnose(model, runs)      # -> Diagnosis: .model, .verdict, .summary()
+
+docs/library.md runs a whole session of these as a script.
+
 ``import hystcli`` loads only the error classes: every other name is imported on first use
 (module ``__getattr__``), so that ``hyst --help`` and a script that needs one function do not
 pay for numpy, pandas and numba up front.
@@ -56,7 +65,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("effects",),
     ("compensation", "stream", "stream_kernels", "safety", "metrics", "inspection", "check", "twin",
      "calibration"),
-    ("identify", "shift", "diagnose", "search", "attribution", "drive", "refit"),
+    ("identification", "shift", "diagnosis", "search", "attribution", "drive", "refit"),
     ("device", "emulator", "robot", "tracking"),
     ("experiment", "batch"),
     ("cli", "__main__"),
@@ -71,12 +80,15 @@ LATE_IMPORTS: frozenset[tuple[str, str]] = frozenset({("model", "compensation")}
 _LAZY = {
     "Compensator": "stream", "Run": "io", "load_model": "io", "read_run": "io", "save_model": "io", "write_run": "io",
     "EffectSpec": "model", "Geometry": "model", "KnobModel": "model", "Model": "model", "Shape": "model",
+    "Settings": "settings", "identify": "identification", "detect_shift": "shift", "compensate": "compensation",
+    "predict": "compensation", "evaluate": "metrics", "diagnose": "diagnosis",
 }
 
 __all__ = [
     "Compensator", "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
-    "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Shape",
-    "ShiftDetectionError", "load_model", "read_run", "save_model", "write_run", "__version__",
+    "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Settings", "Shape",
+    "ShiftDetectionError", "compensate", "detect_shift", "diagnose", "evaluate", "identify", "load_model",
+    "predict", "read_run", "save_model", "write_run", "__version__",
 ]
 
 

@@ -4,7 +4,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
 
 1. per catheter, identify the straight-shaft model on the identification sweep (one per knob),
    as the paper does: dead-zone edges and backlash from the motor current, omega = 1.45
-   (:func:`hystcli.identify.identify`);
+   (:func:`hystcli.identification.identify`);
 2. per shape, detect the shift with Algorithm 1 on a slow sweep recorded under that shape
    (:func:`hystcli.shift.detect_shift` over a :class:`hystcli.shift.ReplayProbe`);
 3. compensate the reference (:func:`hystcli.compensation.compensate`): ``comp`` ignores the
@@ -15,7 +15,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
    periodic, shapes straight / alpha = 45 / alpha = 90) and Table II (2-DoF, non-periodic, shape
    alpha_1 = 45, theta_1 = 0; alpha_2 = 45, theta_2 = 90), beside the paper's values;
 6. beyond the paper: diagnose the Compensation+Shift runs of each catheter
-   (:func:`hystcli.diagnose.diagnose`, leave one run out), compensate again with the augmented
+   (:func:`hystcli.diagnosis.diagnose`, leave one run out), compensate again with the augmented
    model (the base model plus the effects the diagnosis found, detected offsets unchanged) and
    run that fourth controller, ``comp+shift+diag``, on fresh trials whose noise the diagnosis
    never saw; :func:`beyond_table` sets it beside the paper's Compensation+Shift RMSE and the
@@ -58,9 +58,9 @@ from threadpoolctl import threadpool_limits
 from . import metrics
 from .calibration import CALIBRATED_NAMES, calibrated_catheter
 from .compensation import compensate
-from .diagnose import diagnose as _diagnose
+from .diagnosis import diagnose as _diagnose
 from .errors import DataError
-from .identify import identify
+from .identification import identify
 from .io import Run, all_or_none, read_run
 from .model import PAPER_OMEGA, Model, Shape
 from .errors import ShiftDetectionError
@@ -624,7 +624,7 @@ def identify_catheter(sweeps: Mapping[int, Run], name: str) -> Model:
 
     As in the paper (section III): dead-zone edges and backlash widths from the motor current,
     omega = 1.45 (:data:`hystcli.model.PAPER_OMEGA`); the heights follow from them
-    (:func:`hystcli.identify.identify` on its current path).
+    (:func:`hystcli.identification.identify` on its current path).
     """
     knobs, ident = {}, {}
     for k, run in sorted(sweeps.items()):

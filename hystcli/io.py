@@ -653,9 +653,14 @@ def all_or_none() -> Iterator[PendingOutputs]:
 
     Examples
     --------
-    >>> with all_or_none() as out:                 # doctest: +SKIP
-    ...     out.write_text("report.json", report)
-    ...     out.write_text("model.json", model)     # an error here leaves neither file
+    >>> import pathlib, tempfile
+    >>> folder = pathlib.Path(tempfile.mkdtemp())
+    >>> with all_or_none() as out:
+    ...     out.write_text(folder / "report.json", "{}")
+    ...     out.write_text(folder / "model.json", "{}")  # an error here would leave neither file
+    >>> sorted(p.name for p in folder.iterdir())
+    ['model.json', 'report.json']
+    >>> import shutil; shutil.rmtree(folder)
     """
     pending = PendingOutputs()
     try:

@@ -274,6 +274,10 @@ class Evaluation:
             raise KeyError(f"{len(found)} groups match {values}")
         return found[0]
 
+    def summary(self) -> str:
+        """The groups' table as text (what ``hyst evaluate`` prints), then the warnings."""
+        return "\n".join([format_text(group_table(self))] + [f"warning: {w}" for w in self.warnings])
+
     def to_dict(self) -> dict:
         return {
             "format": "hyst-evaluation",
@@ -456,6 +460,10 @@ def evaluate_runs(runs: Sequence[Run], group_by: Iterable[str] = DEFAULT_GROUP_B
                                             None if b[3] == 0 else improvement(b[3], r_mean)))
         groups.append(GroupResult(tuple(zip(group_by, key)), n, p_mean, p_std, r_mean, r_std, tuple(imps)))
     return Evaluation(tuple(results), tuple(groups), group_by, tuple(warnings))
+
+
+evaluate = evaluate_runs
+"""The library's name of :func:`evaluate_runs` (``hystcli.evaluate(runs)``)."""
 
 
 # --------------------------------------------------------------------------------------------

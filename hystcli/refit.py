@@ -13,7 +13,7 @@ For the re-identification the effect is applied to the knob input (``x = effect(
 lag on the input and for a latency (the hysteresis is rate-independent, so a delay of the output
 is a delay of the input), and the same on the loop's slopes for an output lag or creep (a linear
 filter commutes with the slope's linear map); it needs no inversion of the noisy tip. The fit is
-the local output-error refinement of :mod:`hystcli.identify.tip`, started from the sweep's own
+the local output-error refinement of :mod:`hystcli.identification.tip`, started from the sweep's own
 identified loop, on the sweep decimated to :data:`SWEEP_HZ`.
 
 A coupling driven by the other section's bend (the ``-magnitude`` forms) is in the sweep too when
@@ -40,7 +40,7 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from .effects.base import Effect, Signals
-from .identify import tip as T
+from .identification import tip as T
 from .io import Run
 from .model import KnobModel, Model
 
@@ -142,7 +142,7 @@ MAX_NFEV = 30
 
 
 def _refine(th0: np.ndarray, q: np.ndarray, y: np.ndarray, f_scale: float):
-    # the identification's own local refinement (:func:`hystcli.identify.tip._refine`), shorter
+    # the identification's own local refinement (:func:`hystcli.identification.tip._refine`), shorter
     inner = np.where(np.isfinite(T._HI), 1e-7, 0.0)
     th0 = np.minimum(np.maximum(np.asarray(th0, float), T._LO + inner), T._HI - inner)
     span = float(np.ptp(q)) or 1.0

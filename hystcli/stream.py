@@ -384,9 +384,14 @@ class Compensator:
 
     Examples
     --------
-    >>> c = Compensator(hystcli.load_model("shifted.json"), knobs=[1], dt=0.01)   # doctest: +SKIP
-    >>> for r in reference:                                                        # doctest: +SKIP
-    ...     robot.move(1, c.step(r))
+    >>> import hystcli
+    >>> m = hystcli.Model({1: hystcli.KnobModel(d_pos=5.0, d_neg=-5.0, b_pos=6.0, b_neg=6.0)})
+    >>> c = hystcli.Compensator(m, dt=0.01)
+    >>> q = [c.step(r) for r in (0.0, 2.0, 3.0, 2.5)]  # in a robot's loop: robot.move(1, c.step(r))
+    >>> [round(x, 3) for x in q]
+    [0.0, 6.379, 7.069, 0.724]
+    >>> [round(float(y), 9) for y in m.knob(1).forward(q)]  # the model follows the reference
+    [0.0, 2.0, 3.0, 2.5]
     """
 
     def __init__(self, model: Model, knobs: Sequence[int] | None = None, *, dt: float | None = None,

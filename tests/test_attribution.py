@@ -8,7 +8,7 @@ import pytest
 from hystcli import attribution as A
 from hystcli import effects as E
 from hystcli import search as S
-from hystcli.diagnose import _folds, diagnose
+from hystcli.diagnosis import _folds, diagnose
 from test_diagnose import BASE, make_runs
 
 

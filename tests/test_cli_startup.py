@@ -11,7 +11,7 @@ import sys
 import pytest
 
 HEAVY = ("scipy", "pandas", "numba", "matplotlib", "rich", "hystcli.twin", "hystcli.effects",
-         "hystcli.identify", "hystcli.diagnose", "hystcli.experiment")
+         "hystcli.identification", "hystcli.diagnosis", "hystcli.experiment")
 
 
 def _python(code: str, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:

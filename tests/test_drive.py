@@ -8,8 +8,8 @@ from __future__ import annotations
 import pytest
 
 from hystcli import drive as D
-from hystcli.diagnose import diagnose
-from hystcli.identify import identify
+from hystcli.diagnosis import diagnose
+from hystcli.identification import identify
 from hystcli.io import parse_run
 from plants.zoo import catheters as C
 

@@ -1,4 +1,4 @@
-"""Tests of hystcli.identify: the loop that predicts a sweep, each parameter with its interval, an
+"""Tests of hystcli.identification: the loop that predicts a sweep, each parameter with its interval, an
 interval (not a refusal) where the record cannot fix a parameter, walls, the current-only path
 and its refusal, the model file, the command line, sweep checks, determinism and the figure.
 
@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 from hystcli import twin
 from hystcli.cli import app
 from hystcli.errors import DataError, IdentificationError
-from hystcli.identify import check_sweep, find_reversals, identify, plot_identification
+from hystcli.identification import check_sweep, find_reversals, identify, plot_identification
 from hystcli.io import Run, load_model, parse_run, read_run, save_model, write_run
 from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
 from hystcli.settings import DEFAULT

@@ -18,7 +18,7 @@ from hystcli.cli import app
 from hystcli.device import open_probe
 from hystcli.emulator import serve
 from hystcli.errors import ShiftDetectionError
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run, load_model, parse_run, save_model
 from hystcli.shift import detect_shift
 from plants.zoo import plants

@@ -284,7 +284,7 @@ def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
 
 
 def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_compensate():
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.estimate import Estimate
     from hystcli.io import Run
     from hystcli.model import KnobIdentification

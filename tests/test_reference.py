@@ -13,7 +13,7 @@ import reference as R
 from plants.zoo import plants
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-FORBIDDEN = ("hystcli.identify", "hystcli.shift", "hystcli.current", "hystcli.signal")
+FORBIDDEN = ("hystcli.identification", "hystcli.shift", "hystcli.current", "hystcli.signal")
 
 
 def _imports(path: Path) -> set[str]:

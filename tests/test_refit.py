@@ -8,7 +8,7 @@ import pytest
 
 from hystcli import effects as E
 from hystcli import refit as R
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run
 from hystcli.model import KnobModel, Model
 

@@ -35,7 +35,7 @@ from pathlib import Path
 import pytest
 
 from hystcli.errors import HystError
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run, parse_run
 from hystcli.shift import ReplayProbe, detect_shift
 

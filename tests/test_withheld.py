@@ -83,7 +83,7 @@ def zoo_files(tmp_path_factory):
 def test_api_diagnose_and_predict_are_the_command_lines_bytes(zoo_files, tmp_path):
     from dataclasses import replace
 
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.io import dumps_model
 
     d, runs = zoo_files

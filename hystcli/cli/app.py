@@ -411,10 +411,10 @@ def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]
 
     Examples
     --------
-    >>> with progress(quiet) as update:          # doctest: +SKIP
+    >>> items = ["sweep.csv", "replay.csv"]
+    >>> with progress(quiet=True) as update:
     ...     for i, item in enumerate(items, 1):
-    ...         work(item)
-    ...         update(f"did {item}", i, len(items))
+    ...         update(f"read {item}", i, len(items))
     """
     if quiet:
         yield lambda message, done=None, total=None: None

@@ -76,7 +76,7 @@ def identify_cmd(
         run = load_run(sweep, mapping, quiet=quiet)
         # the fit's libraries (scipy, numba) load only once the file is known to be good: a bad
         # file's error line comes in the time the command line itself takes to start
-        from ..identify import identify, plot_identification
+        from ..identification import identify, plot_identification
 
         result = identify(run, omega=omega, use_tip=not current_only, settings=settings)
     for fit in result.fits.values():

@@ -9,7 +9,7 @@ and its exact inverse puts the knob on the ascending envelope when the desired o
 the descending one when it falls. This module is the only place that writes either: prediction
 (:class:`hystcli.model.KnobModel`), the effect chain's moving-edge kernels
 (:mod:`hystcli.effects.kernels`), the streaming compensator (:mod:`hystcli.stream`), the tip fit
-(:mod:`hystcli.identify.tip`) and the twin all call the functions below.
+(:mod:`hystcli.identification.tip`) and the twin all call the functions below.
 
 Every function is compiled with numba (``fastmath=False``: IEEE operations in source order), and
 each one-sample function is plain Python underneath (``.py_func``): the streaming compensator runs

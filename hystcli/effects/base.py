@@ -181,7 +181,7 @@ class EffectType:
     driver: str = ""
     """What drives the effect: ``shape``, ``condition``, ``other knob``, ``speed``, ``time``, ``tip``."""
     regressors: tuple[str, ...] = ()
-    """The physical regressors (:data:`hystcli.diagnose.REGRESSORS`) its residual follows."""
+    """The physical regressors (:data:`hystcli.diagnosis.REGRESSORS`) its residual follows."""
     forms: tuple[Form, ...] = ()
 
     # -- the default form, for code that knows one form per effect ------------------------------

@@ -276,6 +276,12 @@ class Diagnosis:
     """How long the sweep's tip trails its motor current at the edges (given a sweep with current):
     the evidence on which side of the tendons a delay sits (:mod:`hystcli.drive`)."""
 
+    def summary(self) -> str:
+        """The verdict, then each effect added with its parameters."""
+        added = [f"added {s.name}{f' ({s.form})' if s.form else ''}: "
+                 + ", ".join(f"{k} = {v:.4g}" for k, v in s.params.items()) for s in self.selected]
+        return "\n".join([self.verdict] + (added or ["no effect added"]))
+
     @property
     def ranking(self) -> tuple[Candidate, ...]:
         """Round 1's candidates, best first."""
