@@ -37,8 +37,8 @@ imports neither typer, rich nor matplotlib.
 3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
 4. io: runs and models in files, the importer of foreign logs;
 5. effects: the effect chain around the hysteresis;
-6. use: prediction and compensation (batch and streaming), motion limits, tables and figures,
-   checks of a data set, the twin and its calibrated catheters;
+6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
+   reports (tables, formats, figures), checks of a data set, the twin and its calibrated catheters;
 7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
 8. device: the robot protocol, driver, emulator and tracking;
 9. studies: the paper's experiment, batches of runs;
@@ -63,7 +63,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("core", "model"),
     ("io", "importer"),
     ("effects",),
-    ("compensation", "stream", "stream_kernels", "safety", "metrics", "inspection", "check", "twin",
+    ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check", "twin",
      "calibration"),
     ("identification", "shift", "diagnosis", "search", "attribution", "drive", "refit"),
     ("device", "emulator", "robot", "tracking"),

@@ -56,6 +56,8 @@ import numpy as np
 from threadpoolctl import threadpool_limits
 
 from . import metrics
+from .report.evaluation import evaluation_figure
+from .report.table import TEXT_WIDTH, Table, format_markdown, format_text
 from .calibration import CALIBRATED_NAMES, calibrated_catheter
 from .compensation import compensate
 from .diagnosis import diagnose as _diagnose
@@ -882,7 +884,7 @@ def _ratio_text(c: Cell, metric: str) -> str:
     return f"{r:.2f} " + ("ok" if c.within(metric) else "MISS")
 
 
-def comparison_table(result: ExperimentResult, table: str) -> metrics.Table:
+def comparison_table(result: ExperimentResult, table: str) -> Table:
     """Table I or II as rows: controller, shape, ours and the paper's (mean, std), ratio, mark."""
     cols = ("controller", "shape", "ptpe_ours", "ptpe_paper", "ptpe_ratio", "rmse_ours", "rmse_paper",
             "rmse_ratio")
@@ -918,7 +920,7 @@ def comparison_table(result: ExperimentResult, table: str) -> metrics.Table:
              "(mean, std) in deg over catheters x knobs x trials; paper: Kim & Mansi, Table " + table
              + f"; ok = ours within {TOLERANCE:.0%} of the paper's mean; improvement rate of "
                "Compensation+Shift against No Compensation and Compensation-Only")
-    return metrics.Table(cols, heads, tuple(rows), notes, keys=2)
+    return Table(cols, heads, tuple(rows), notes, keys=2)
 
 
 def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]], forms: Sequence[str] = ()) -> str:
@@ -930,7 +932,7 @@ def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]], forms: Seq
                      for (n, p), f in zip(effects, forms))
 
 
-def beyond_table(result: ExperimentResult) -> metrics.Table:
+def beyond_table(result: ExperimentResult) -> Table:
     """Beyond the paper: Compensation+Shift with the diagnosed model beside the paper's.
 
     One row per bent scenario: the paper's Compensation+Shift RMSE and PTPE, ours, ours after
@@ -955,10 +957,10 @@ def beyond_table(result: ExperimentResult) -> metrics.Table:
         notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects, d.forms)}; "
                      f"held-out tip RMSE {d.rmse_before:.2f} -> {d.rmse_after:.2f} deg ({d.holdout}); "
                      f"the catheter has {_effects_text(d.true_effects)}")
-    return metrics.Table(cols, heads, tuple(rows), tuple(notes))
+    return Table(cols, heads, tuple(rows), tuple(notes))
 
 
-def shift_table(result: ExperimentResult) -> metrics.Table:
+def shift_table(result: ExperimentResult) -> Table:
     """Algorithm 1 per catheter, scenario and knob: detected and true offsets."""
     cols = ("catheter", "scenario", "knob", "offset", "offset_lo", "offset_hi", "true_offset", "error", "edge",
             "edge_found_at", "true_edge", "edge_error", "travel")
@@ -969,25 +971,25 @@ def shift_table(result: ExperimentResult) -> metrics.Table:
                   s.edge_error, s.result.travel) if s.result is not None else
                  (s.catheter, s.scenario, s.knob, None, None, None, s.true_offset, None, "refused", None, None, None,
                   None) for s in result.shifts)
-    return metrics.Table(cols, heads, rows, (
+    return Table(cols, heads, rows, (
         "Algorithm 1 on the replays",
         "deg; low/high: the offset's 95 % interval; error = detected - true offset; edge error = found - true "
         "edge (the search's own error; the offset is measured from where the sweep's current took the same "
         "tendon up)"), keys=3)
 
 
-def _section(table: metrics.Table, fmt: str) -> str:
+def _section(table: Table, fmt: str) -> str:
     """One titled table: ``notes[0]`` is the title, ``notes[1]`` the note under it, any further
     notes a list below that."""
     title, note, *items = table.notes
-    body = metrics.Table(table.columns, table.headers, table.rows, keys=table.keys)
+    body = Table(table.columns, table.headers, table.rows, keys=table.keys)
     if fmt == "markdown":
         listed = "".join(f"- {line}\n" for line in items)
-        return f"**{title}**\n\n" + metrics.format_markdown(body) + f"\n{note}\n" + (f"\n{listed}" if items else "")
-    width = metrics.TEXT_WIDTH
+        return f"**{title}**\n\n" + format_markdown(body) + f"\n{note}\n" + (f"\n{listed}" if items else "")
+    width = TEXT_WIDTH
     listed = "".join(textwrap.fill(line, width, initial_indent="  ", subsequent_indent="    ",
                                    break_on_hyphens=False) + "\n" for line in items)
-    return (f"{title}\n\n" + metrics.format_text(body) + "\n"
+    return (f"{title}\n\n" + format_text(body) + "\n"
             + textwrap.fill(note, width, break_on_hyphens=False) + f"\n{listed}")
 
 
@@ -1030,7 +1032,7 @@ def figures(result: ExperimentResult, fmt: str = "png") -> dict[str, bytes]:
                if r.meta.get("scenario") in scen and r.meta.get("catheter") == first
                and r.meta.get("trial") == "1" and (knob is None or f"q{knob}" in r)]
         if sel:
-            out[f"{name}.{fmt}"] = metrics.evaluation_figure(sel, fmt)
+            out[f"{name}.{fmt}"] = evaluation_figure(sel, fmt)
     return out
 
 

@@ -373,8 +373,8 @@ def _json_default(obj: Any) -> Any:
 
 
 def echo_table(table: Any, fmt: "OutputFormat | str", digits: int = 2) -> None:
-    """A :class:`hystcli.metrics.Table` on stdout in any ``--format``."""
-    from ..metrics import format_table
+    """A :class:`hystcli.report.table.Table` on stdout in any ``--format``."""
+    from ..report.table import format_table
 
     typer.echo(format_table(table, getattr(fmt, "value", fmt), digits), nl=False)
 

@@ -306,7 +306,7 @@ def status_cmd(
         echo_json(st.to_dict())
         return
     if fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("knob", "angle", "current", "tip"), ("knob", "angle (deg)", "current (mA)", "tip (deg)"),
                          tuple((s.knob, s.angle, s.current, s.tip) for s in st.knobs)), fmt, digits=3)
@@ -332,7 +332,7 @@ def _render_moves(moves: dict, fmt: OutputFormat, quiet: bool) -> None:
         echo_json({"knobs": {str(k): {"from": b.angle, "to": a.angle, "current": a.current, "tip": a.tip}
                              for k, (b, a) in moves.items()}})
     elif fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("knob", "from", "to", "current", "tip"),
                          ("knob", "from (deg)", "to (deg)", "current (mA)", "tip (deg)"),

@@ -89,7 +89,7 @@ def simulate_cmd(
     if fmt == OutputFormat.json:
         echo_json(summary)
     elif fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("key", "value"), ("key", "value"), tuple((k, str(v)) for k, v in summary.items())), fmt)
     info(f"wrote {output}: {len(run)} samples, knobs {','.join(map(str, run.knobs('q')))}, "

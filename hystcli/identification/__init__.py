@@ -401,7 +401,7 @@ def plot_identification(run: Run, result: Identification, path) -> None:  # noqa
     from matplotlib.figure import Figure
 
     from ..io import atomic_write
-    from ..metrics import figure_bytes
+    from ..report.figures import figure_bytes
 
     ks = sorted(result.fits)
     fig = Figure(figsize=(11, 4.2 * len(ks)))
