@@ -46,7 +46,7 @@ from hystcli.errors import ShiftDetectionError
 from hystcli.calibration import calibrated_catheter
 from hystcli.device import (DEFAULT_DWELL, DEFAULT_MEAN, Device, DeviceProbe, decode_frame,
                             encode_frame, open_probe)
-from hystcli.emulator import DeviceEmulator
+from hystcli.device.emulator import DeviceEmulator
 from hystcli.model import KnobIdentification, Model, Shape
 from hystcli.shift import detect_shift
 from hystcli.twin import LiveTwin

@@ -40,7 +40,7 @@ imports neither typer, rich nor matplotlib.
 6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
    reports (tables, formats, figures), checks of a data set, the twin and its calibrated catheters;
 7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
-8. device: the robot protocol, driver, emulator and tracking;
+8. device: the robot protocol, driver, probe, motions, tracking and emulator;
 9. studies: the paper's experiment, batches of runs;
 10. cli: the command line (options, one library call, rendering).
 
@@ -66,7 +66,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check", "twin",
      "calibration"),
     ("identification", "shift", "diagnosis", "search", "attribution", "drive", "refit"),
-    ("device", "emulator", "robot", "tracking"),
+    ("device",),
     ("experiment", "batch"),
     ("cli", "__main__"),
 )

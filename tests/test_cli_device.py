@@ -22,10 +22,10 @@ from hystcli import compensation
 from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
-from hystcli.emulator import Fault, serve
+from hystcli.device.emulator import Fault, serve
 from hystcli.io import Run, read_run, write_run
 from hystcli.model import Shape
-from hystcli.robot import Interrupted, play_trajectory
+from hystcli.device.robot import Interrupted, play_trajectory
 from hystcli.safety import LimitExceeded, Limits
 from hystcli.twin import LiveTwin, periodic, simulate
 from simrobot import TIMEOUT, interrupt_after, sim_robot, start_sim_robot, stop

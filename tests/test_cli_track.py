@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 
 from hystcli.calibration import calibrated_catheter
 from hystcli.cli import app
-from hystcli.emulator import Fault, serve
+from hystcli.device.emulator import Fault, serve
 from hystcli.io import Run, read_run, save_model, write_run
 from hystcli.model import Model, Shape
 from hystcli.twin import LiveTwin, periodic, simulate

@@ -230,7 +230,7 @@ def test_contact_spike_live_probe_safety_stop():
     current (no-load 120 mA + k_load(1+mu) 5 mA/deg x 25 deg past an edge ~ 250 mA) and under
     the 2000 mA ceiling's check -> SafetyStop, motors stopped, knob back at 0 deg."""
     from hystcli.device import open_probe
-    from hystcli.emulator import Fault, serve
+    from hystcli.device.emulator import Fault, serve
     from hystcli.errors import SafetyStop
     from hystcli.shift import detect_shift
     from hystcli.twin import LiveTwin
@@ -284,7 +284,7 @@ def test_bad_baud_is_a_usage_error(model_path, tmp_path):
 def test_one_connection_for_every_knob(model_path, tmp_path):
     """Both knobs are searched over one connection: one handshake (the port used to be opened,
     and the device greeted, once per knob)."""
-    from hystcli.emulator import serve
+    from hystcli.device.emulator import serve
     from hystcli.twin import LiveTwin
 
     server = serve(LiveTwin(CAT, seed=2))

@@ -16,7 +16,7 @@ from typer.testing import CliRunner
 
 from hystcli.cli import app
 from hystcli.device import open_probe
-from hystcli.emulator import serve
+from hystcli.device.emulator import serve
 from hystcli.errors import ShiftDetectionError
 from hystcli.identification import identify
 from hystcli.io import Run, load_model, parse_run, save_model

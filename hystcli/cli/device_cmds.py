@@ -1,7 +1,7 @@
 """Commands of the live robot link: ``sim-robot`` (the twin behind a pseudo-terminal), ``sweep``,
 ``play``, and the manual ones: ``status``, ``home``, ``jog``.
 
-Each parses, calls one core function of :mod:`hystcli.robot` (or the emulator), renders. Every
+Each parses, calls one core function of :mod:`hystcli.device.robot` (or the emulator), renders. Every
 command that moves a knob checks the whole request against the limits of
 :mod:`hystcli.cli.robot_opts` (tightened by what the robot announces) before the first MOVE.
 """
@@ -83,7 +83,7 @@ def sim_robot_cmd(
     --catheter and --effect.
     """
     from ..effects import format_effects
-    from ..emulator import Fault, serve
+    from ..device.emulator import Fault, serve
     from ..twin import LiveTwin
 
     knob_list = parse_knobs(one_of(knob, knobs_alias, "--knob", "--knobs")) or (1, 2)
@@ -223,7 +223,7 @@ def play_cmd(
     the knobs go back to where they began (--no-return: they hold), the error says where each
     knob is, nothing is written, and the exit code is non-zero.
     """
-    from ..robot import Interrupted, check_trajectory, play_trajectory
+    from ..device.robot import Interrupted, check_trajectory, play_trajectory
     from ..safety import LimitExceeded
 
     mode = speed_mode(allow_fast, strict_speed)
@@ -295,7 +295,7 @@ def status_cmd(
 
     Reads only (HELLO and one STATE per knob): nothing moves, no STOP is sent.
     """
-    from ..robot import status
+    from ..device.robot import status
 
     device = _open(port, baud, timeout)
     try:
@@ -366,7 +366,7 @@ def home_cmd(
     Every target is checked against the travel limit first. On a fault or Ctrl-C the motors
     stop and the error says where each knob is.
     """
-    from ..robot import Interrupted, home
+    from ..device.robot import Interrupted, home
 
     knobs = parse_knobs(knob, most=MAX_KNOB)
     _check_speed(speed, max_speed, travel_limit, abs(angle))
@@ -408,7 +408,7 @@ def jog_cmd(
     Refused before anything moves when |--by| exceeds --max-step, the target the travel limit,
     or --speed the speed limit.
     """
-    from ..robot import Interrupted, jog
+    from ..device.robot import Interrupted, jog
 
     if abs(by) > max_step:
         raise typer.BadParameter(f"|{by:g}| deg is beyond --max-step {max_step:g} deg", param_hint="--by")

@@ -29,9 +29,9 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
-from .device import (FEATURES, MAX_DWELL, MAX_FRAME, NO_SEQ, PROTOCOL_VERSION, DeviceInfo, Frame,
-                     FrameError, decode_frame, encode_frame, parse_knob, parse_number)
-from .errors import DataError
+from ..errors import DataError
+from .protocol import (FEATURES, MAX_DWELL, MAX_FRAME, NO_SEQ, PROTOCOL_VERSION, DeviceInfo, Frame, FrameError,
+                       decode_frame, encode_frame, parse_knob, parse_number)
 
 FAULT_KINDS = ("silent", "garble", "close", "error", "spike", "delay")
 

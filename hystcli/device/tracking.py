@@ -8,7 +8,7 @@ start). What the robot answers (motor current, the tracker's tip angle) is logge
 reference and the commands: the log is a run CSV (docs/design.md section 6) that ``hyst evaluate``
 reads as it is.
 
-Safety, as ``hyst play`` (:mod:`hystcli.robot`): a whole reference file is compensated and checked
+Safety, as ``hyst play`` (:mod:`hystcli.device.robot`): a whole reference file is compensated and checked
 against the limits before the first ``MOVE`` (nothing moves when a command is beyond the travel
 limit, or, with ``speed="strict"``, a step beyond the speed limit); a reference on stdin is checked
 sample by sample, before each ``MOVE``. With ``speed="limit"`` the compensator rate-limits its
@@ -28,10 +28,10 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
-from .errors import DataError, SafetyStop
-from .io import Run
-from .model import Model
-from .safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits, check_speed_mode
+from ..errors import DataError, SafetyStop
+from ..io import Run
+from ..model import Model
+from ..safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits, check_speed_mode
 
 _NAMES = ("t", "r1", "r2")
 
@@ -180,7 +180,7 @@ class TrackResult:
 
 def _compensator(model: Model, ref: Reference, knobs: tuple, dt: float, latency: str,
                  limits: Limits | None) -> Any:
-    from .stream import Compensator
+    from ..stream import Compensator
 
     for k in knobs:
         model.knob(k)
@@ -242,7 +242,7 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
     LinkError, DeviceError, SafetyStop, DataError, ShiftDetectionError
         While moving: the motors were stopped and the knobs returned (or held); the message
         says where they are.
-    hystcli.robot.Interrupted
+    hystcli.device.robot.Interrupted
         Ctrl-C while moving (likewise).
     """
     from .robot import (_hold_statement, _Pacer, _reraise_with, _return_knobs, _send_row, check_trajectory,
@@ -380,8 +380,8 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
 def _detect(device: Any, model: Model, knobs: tuple, options: dict) -> dict:
     """Algorithm 1 on each knob over the open device (``hyst detect-shift --port``); every knob
     goes back to where it began."""
-    from . import device as device_mod
-    from . import shift as shift_mod
+    from .. import shift as shift_mod
+    from . import probe as device_mod
 
     probe_opts = {name: options.pop(name) for name in ("current_ceiling", "speed", "dwell", "mean")
                   if name in options}

@@ -19,9 +19,10 @@ from typing import Any, Callable, Iterable, Mapping
 
 import numpy as np
 
-from .device import Device, DeviceInfo, Sample
-from .errors import DataError, HystError, LinkError, SafetyStop
-from .safety import DEFAULT_MOVE_SPEED, Limits, Planned, check_target, plan_motion
+from ..errors import DataError, HystError, LinkError, SafetyStop
+from ..safety import DEFAULT_MOVE_SPEED, Limits, Planned, check_target, plan_motion
+from .driver import Device
+from .protocol import DeviceInfo, Sample
 
 DEVICE_LIMIT_KEYS = {"travel": "travel", "max_speed": "max_speed"}
 """Optional handshake fields (docs/protocol.md, "Device limits") -> :class:`Limits` fields."""
@@ -389,7 +390,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     Interrupted
         Ctrl-C while playing (likewise).
     """
-    from .io import Run
+    from ..io import Run
 
     info = device.info or device.hello()
     plan = check_trajectory(device, trajectory, limits, speed=speed)
