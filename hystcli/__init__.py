@@ -65,7 +65,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("effects",),
     ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check", "twin",
      "calibration"),
-    ("identification", "shift", "diagnosis", "search", "attribution", "drive", "refit"),
+    ("identification", "shift", "diagnosis"),
     ("device",),
     ("experiment", "batch"),
     ("cli", "__main__"),

@@ -36,7 +36,7 @@ import numpy as np
 from .errors import DataError, HystError
 from .io import Run
 from .model import Shape
-from .report.table import (FORMATS, TEXT_WIDTH, Cell, Table, format_csv, format_latex_long, format_markdown,
+from .report.table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
                            format_text, latex_escape)
 
 UNKNOWN = "unknown"

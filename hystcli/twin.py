@@ -31,7 +31,7 @@ adds ``stiffness`` mA per degree of knob past it (the ``contact`` effect). The m
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass
 from types import MappingProxyType
 from typing import Mapping, Sequence
 

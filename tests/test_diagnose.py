@@ -13,7 +13,8 @@ from hypothesis import strategies as st
 from hystcli import compensation
 from hystcli import effects as E
 from hystcli import twin
-from hystcli.diagnosis import MIN_GAIN_PCT, PHASES, _phase, diagnose
+from hystcli.diagnosis import MIN_GAIN_PCT, PHASES, diagnose
+from hystcli.diagnosis.where import _phase
 from hystcli.errors import DataError, ModelError
 from hystcli.io import Run
 from hystcli.model import KnobModel, Model, Shape

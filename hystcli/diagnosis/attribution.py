@@ -33,7 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
-from . import effects as E
+from .. import effects as E
 from .search import Prep
 
 REGRESSORS = ("other knob angle", "other knob magnitude", "knob velocity", "time since reversal",

@@ -25,14 +25,13 @@ edges to show it.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from .io import Run
-from .model import Model
-from .signal.reading import read_current
+from ..io import Run
+from ..model import Model
+from ..signal.reading import read_current
 
 MIN_SPEED = 2.0
 """Knob speed (deg/s) at an edge crossing below which a reading is not used: the edges' reading

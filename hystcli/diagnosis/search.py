@@ -18,12 +18,12 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from . import effects as E
-from .effects import kernels
-from .effects.base import EffectType, Form, Signals
-from .errors import ModelError
-from .io import Run
-from .model import KnobModel, Model, Shape
+from .. import effects as E
+from ..effects import kernels
+from ..effects.base import EffectType, Form, Signals
+from ..errors import ModelError
+from ..io import Run
+from ..model import KnobModel, Model, Shape
 
 UNPREDICTED = 1e300
 """The SSE a table cell holds where a grid point cannot predict a run (non-finite): finite, so
@@ -304,7 +304,7 @@ def with_knobs(p: Prep, knobs: Mapping[int, KnobModel]) -> Prep:
 def table_loops(preps: Sequence[Prep], base: Sequence[E.Effect], base_sse: np.ndarray, etype: EffectType,
                 grid: Sequence[GridPoint], loops: Sequence[Mapping[int, KnobModel] | None]) -> np.ndarray:
     """As :func:`table`, where grid point ``j`` brings its own knob models ``loops[j]`` (the loop
-    re-identified with the effect acting, :mod:`hystcli.refit`); None keeps the runs' own."""
+    re-identified with the effect acting, :mod:`hystcli.diagnosis.refit`); None keeps the runs' own."""
     T = table(preps, base, base_sse, etype, [g if lp is None else GridPoint(g.form, g.params, None)
                                              for g, lp in zip(grid, loops)])
     base = tuple(base)
