@@ -12,7 +12,7 @@ from __future__ import annotations
 import math
 import time
 
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.identification import identify
 
 DURATION_S = 600.0

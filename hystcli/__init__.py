@@ -38,10 +38,11 @@ imports neither typer, rich nor matplotlib.
 4. io: runs and models in files, the importer of foreign logs;
 5. effects: the effect chain around the hysteresis;
 6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
-   reports (tables, formats, figures), checks of a data set, the twin and its calibrated catheters;
+   reports (tables, formats, figures), checks of a data set;
 7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
 8. device: the robot protocol, driver, probe, motions, tracking and emulator;
-9. studies: the paper's experiment, batches of runs;
+9. studies: the twin, its calibrated catheters and the paper's experiment (:mod:`hystcli.sim`),
+   batches of runs;
 10. cli: the command line (options, one library call, rendering).
 
 One arrow goes up, on purpose: ``Model.predict`` and ``Model.compensate`` (the design's
@@ -63,11 +64,10 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("core", "model"),
     ("io", "importer"),
     ("effects",),
-    ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check", "twin",
-     "calibration"),
+    ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check"),
     ("identification", "shift", "diagnosis"),
     ("device",),
-    ("experiment", "batch"),
+    ("sim", "batch"),
     ("cli", "__main__"),
 )
 """The layers of the package, lowest first: each names the modules and subpackages directly under

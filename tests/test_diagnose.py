@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 from hystcli import compensation
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.diagnosis import MIN_GAIN_PCT, PHASES, diagnose
 from hystcli.diagnosis.where import _phase
 from hystcli.errors import DataError, ModelError

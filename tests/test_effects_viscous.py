@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import hystcli
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.effects import kernels
 from hystcli.effects.chain import ChainState, tip_chain
 from hystcli.io import Run

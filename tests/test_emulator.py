@@ -17,7 +17,8 @@ import serial
 from hystcli.device import Device, DeviceProbe, crc8, decode_frame, encode_frame
 from hystcli.device.emulator import DeviceEmulator, Fault, PtyServer, serve
 from hystcli.errors import DataError, DeviceError, LinkError, SafetyStop
-from hystcli.twin import LiveTwin, get_catheter
+from hystcli.sim.live import LiveTwin
+from hystcli.sim.twin import get_catheter
 
 CAT = get_catheter("example-a")
 
@@ -429,10 +430,10 @@ def test_reply_deadline_grows_by_the_motion_the_host_asked_for(server):
 WARM_SCRIPT = r"""
 import sys
 import numba.core.dispatcher as dispatcher
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.device import Device
 from hystcli.device.emulator import serve
-from hystcli.twin import LiveTwin
+from hystcli.sim.live import LiveTwin
 
 server = serve(LiveTwin(calibrated_catheter("ice-a"), effects=None, seed=0))
 # from here on, any numba compilation or cache load (what made a fresh robot's first MOVE take

@@ -9,7 +9,7 @@ import pytest
 
 from hystcli import effects as E
 from hystcli.diagnosis import search as S
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.model import Shape
 from test_diagnose import BASE, CAT, T, make_runs
 

@@ -15,7 +15,7 @@ from typing import Annotated, Any, List, Optional
 import typer
 
 from .. import io
-from ..calibration import CALIBRATED_NAMES, calibrated_catheter
+from ..sim.calibration import CALIBRATED_NAMES, calibrated_catheter
 from ..errors import DataError, HystError
 from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
@@ -84,7 +84,7 @@ def sim_robot_cmd(
     """
     from ..effects import format_effects
     from ..device.emulator import Fault, serve
-    from ..twin import LiveTwin
+    from ..sim.live import LiveTwin
 
     knob_list = parse_knobs(one_of(knob, knobs_alias, "--knob", "--knobs")) or (1, 2)
     if not name or len(name) > 32 or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
@@ -177,7 +177,7 @@ def sweep_cmd(
     a straight shaft: play it on the robot with `hyst play` and identify the model from the
     recording with `hyst identify`.
     """
-    from ..twin import sweep
+    from ..sim.twin import sweep
 
     t, q = sweep(amplitude=amplitude, cycles=cycles, peak_speed=peak_speed, fs=fs)
     run = io.Run({"t": t, f"q{knob}": q}, {"motion": "sweep", "controller": "none", "knob": str(knob),

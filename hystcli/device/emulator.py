@@ -7,7 +7,7 @@ answer ``ERR``, a current spike, a late reply) and :class:`PtyServer` / :func:`s
 put that device behind a real pseudo-terminal (``os.openpty``) whose slave path any serial
 client opens like a USB serial port.
 
-The twin is anything with the interface of ``hystcli.twin.LiveTwin``: ``move(knob, q_target,
+The twin is anything with the interface of ``hystcli.sim.live.LiveTwin``: ``move(knob, q_target,
 speed_deg_s=...) -> (knob_angle, motor_current, tip_angle)``, ``state(knob)`` (same triple),
 ``tip_available`` and the catheter it simulates; the optional features need ``move(..., dt=...)``,
 ``hold(duration, dt=...)`` and ``last_samples(knob)`` too. Besides the base protocol the emulator serves the optional

@@ -10,7 +10,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
 3. compensate the reference (:func:`hystcli.compensation.compensate`): ``comp`` ignores the
    shift (Compensation-Only), ``comp+shift`` uses the detected offsets;
 4. run each controller (``none``: q = r; ``comp``; ``comp+shift``) on the twin
-   (:func:`hystcli.twin.simulate_motion`), several trials with different sensor noise;
+   (:func:`hystcli.sim.twin.simulate_motion`), several trials with different sensor noise;
 5. evaluate every run (:func:`hystcli.metrics.evaluate_runs`) into the cells of Table I (1-DoF,
    periodic, shapes straight / alpha = 45 / alpha = 90) and Table II (2-DoF, non-periodic, shape
    alpha_1 = 45, theta_1 = 0; alpha_2 = 45, theta_2 = 90), beside the paper's values;
@@ -43,10 +43,7 @@ with ``<scenario>`` one of ``straight``, ``alpha45``, ``alpha90``, ``2dof``.
 """
 from __future__ import annotations
 
-import io as _io
 import json
-import math
-import textwrap
 from dataclasses import dataclass, field
 from pathlib import Path
 from types import MappingProxyType
@@ -55,305 +52,19 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from . import metrics
-from .report.evaluation import evaluation_figure
-from .report.table import TEXT_WIDTH, Table, format_markdown, format_text
-from .calibration import CALIBRATED_NAMES, calibrated_catheter
-from .compensation import compensate
-from .diagnosis import diagnose as _diagnose
-from .errors import DataError
-from .identification import identify
-from .io import Run, all_or_none, read_run
-from .model import PAPER_OMEGA, Model, Shape
-from .errors import ShiftDetectionError
-from .shift import ReplayProbe, ShiftResult, detect_shift
-from .twin import VirtualCatheter, nonperiodic, periodic, simulate, simulate_motion, sweep
-
-# --------------------------------------------------------------------------------------------
-# the paper's values
-# --------------------------------------------------------------------------------------------
-CONTROLLERS = ("none", "comp", "comp+shift")
-"""The paper's three controllers: No Compensation, Compensation-Only, Compensation+Shift."""
-
-DIAGNOSED = "comp+shift+diag"
-"""Beyond the paper: Compensation+Shift with the model ``hyst diagnose`` augmented."""
-
-BEYOND_FACTOR = 0.5
-"""The target beyond the paper: the diagnosed controller's RMSE at most half the paper's
-Compensation+Shift."""
-
-SCENARIOS_1DOF = ("straight", "alpha=45", "alpha=90")
-"""Columns of Table I: the shaft shapes of the 1-DoF periodic runs (paper section III-A)."""
-
-SCENARIO_2DOF = "alpha=45,theta=0;alpha=45,theta=90"
-"""The one column of Table II: two bent segments, one in each tendon plane."""
-
-# Kim & Mansi, Table I ("PTPE and RMSE for 1-DoF: periodic inputs"), (mean, std) in deg.
-# Compensation+Shift on the straight shaft is "-" in the paper (nothing to shift).
-PAPER_TABLE_I: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]] = MappingProxyType({
-    ("none", "straight"): {"ptpe": (57.2, 4.2), "rmse": (18.5, 3.4)},
-    ("none", "alpha=45"): {"ptpe": (61.9, 2.1), "rmse": (25.4, 1.5)},
-    ("none", "alpha=90"): {"ptpe": (75.0, 10.1), "rmse": (38.2, 5.5)},
-    ("comp", "straight"): {"ptpe": (18.6, 2.3), "rmse": (7.7, 1.5)},
-    ("comp", "alpha=45"): {"ptpe": (30.12, 2.5), "rmse": (24.2, 3.5)},
-    ("comp", "alpha=90"): {"ptpe": (45.0, 5.6), "rmse": (31.3, 4.1)},
-    ("comp+shift", "alpha=45"): {"ptpe": (24.3, 2.3), "rmse": (7.9, 1.3)},
-    ("comp+shift", "alpha=90"): {"ptpe": (26.0, 3.2), "rmse": (8.0, 1.2)},
-})
-"""The paper's Table I (source: Kim & Mansi, Table I), keyed by (controller, scenario)."""
-
-# Kim & Mansi, Table II ("RMSE for 2-DoF: non-periodic inputs"), (mean, std) in deg.
-PAPER_TABLE_II: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]] = MappingProxyType({
-    ("none", SCENARIO_2DOF): {"ptpe": (55.6, 8.3), "rmse": (18.0, 3.2)},
-    ("comp", SCENARIO_2DOF): {"ptpe": (30.5, 3.9), "rmse": (16.0, 3.3)},
-    ("comp+shift", SCENARIO_2DOF): {"ptpe": (25.1, 3.4), "rmse": (10.1, 3.7)},
-})
-"""The paper's Table II (source: Kim & Mansi, Table II), keyed by (controller, scenario)."""
-
-PAPER_CELLS: Mapping[tuple[str, str], Mapping[str, tuple[float, float]]] = MappingProxyType(
-    {**PAPER_TABLE_I, **PAPER_TABLE_II})
-"""Every cell of the paper's Tables I and II, keyed by (controller, scenario)."""
-
-# Kim & Mansi, Tables I and II, row "Improvement rate (%)" of Compensation+Shift, given in the
-# paper as "<against No Compensation> and <against Compensation-Only>".
-PAPER_IMPROVEMENT: Mapping[str, Mapping[str, tuple[float, float]]] = MappingProxyType({
-    "alpha=45": {"ptpe": (60.74, 19.3), "rmse": (68.9, 67.3)},
-    "alpha=90": {"ptpe": (65.3, 42.2), "rmse": (79.0, 74.4)},
-    SCENARIO_2DOF: {"ptpe": (45.8, 17.7), "rmse": (44.0, 37.5)},
-})
-"""The paper's improvement rates of Compensation+Shift (vs none, vs comp), source: Kim & Mansi."""
-
-TOLERANCE = 0.30
-"""How close every cell must come to the paper's: within 30 %."""
-
-DETECT_MAX_TRAVEL = 60.0
-"""Travel limit of Algorithm 1 in the demo (deg of knob). The calibrated catheters have dead
-zones of about +-19 deg and shifts up to 27.5 deg of knob, so the edge a search from q = 0 meets
-can lie up to 47 deg away (at 90 deg of bend the search starts with the posterior tendon taut, a
-few degrees outside the new dead zone, inside the backlash of the sheath friction: the fall into
-the dead zone is then hard to see and the search may go on to the far edge); the replays cover
-+-60 deg."""
-
-DETECT_STEP = 0.5
-"""Unit step u of Algorithm 1 (deg), the shift module's default."""
-
-SWEEP_FS = 1000.0
-"""Sample rate of the identification sweeps (Hz): the paper's sweep at a motor-driver rate."""
-
-REPLAY_AMPLITUDE = 60.0
-REPLAY_SPEED = 10.0
-REPLAY_FS = 200.0
-"""The detection replay: a slow triangle 0 -> +60 -> -60 -> 0 deg at 10 deg/s, 200 Hz. Slow so
-the viscous lag of the tendon moves the edge the current shows by well under a unit step."""
-
-# What the lab's recorder keeps: time to 1 us, knob encoder to 1e-4 deg, EM tip to 1e-3 deg,
-# motor current to 0.01 mA. Simulated and file-read recordings are rounded alike, so the demo
-# gives the same numbers from sample_data/ as from the twin directly.
-_RESOLUTION = {"t": 6, "q": 4, "r": 4, "y": 3, "c": 2}
-
-
-def _quantize(run: Run) -> Run:
-    cols = {}
-    for name, values in run.columns.items():
-        digits = _RESOLUTION.get(name[:1]) if name == "t" or name[1:] in ("1", "2") else None
-        cols[name] = np.round(values, digits) + 0.0 if digits is not None else values
-    return Run(cols, run.meta, run.source)
-
-
-def _seed(seed: int, *keys: int) -> int:
-    """A seed per (experiment seed, keys...): independent streams, reproducible."""
-    return int(np.random.SeedSequence([int(seed), *map(int, keys)]).generate_state(1)[0])
-
-
-# --------------------------------------------------------------------------------------------
-# scenarios and recordings
-# --------------------------------------------------------------------------------------------
-@dataclass(frozen=True)
-class Scenario:
-    """One column of Table I or II.
-
-    Attributes
-    ----------
-    name : str
-        ``straight``, ``alpha=45``, ``alpha=90`` or :data:`SCENARIO_2DOF`.
-    table : str
-        ``"I"`` or ``"II"``.
-    motion : str
-        ``periodic`` (1-DoF) or ``nonperiodic`` (2-DoF).
-    file_tag : str
-        Name part of its replay files.
-    """
-
-    name: str
-    table: str
-    motion: str
-    file_tag: str
-
-    def shape(self, knob: int) -> Shape:
-        """The shaft shape of a run of knob ``knob`` (the 2-DoF shape whatever the knob)."""
-        if self.table == "II":
-            return Shape.parse(SCENARIO_2DOF)
-        if self.name == "straight":
-            return Shape()
-        alpha = float(self.name.split("=")[1])
-        return Shape.parse(f"alpha={alpha:g},theta={0 if knob == 1 else 90}")
-
-    @property
-    def knobs_together(self) -> bool:
-        """Both knobs in one run (2-DoF) rather than one knob per run."""
-        return self.table == "II"
-
-    @property
-    def knob_groups(self) -> list[tuple[int, ...]]:
-        """The knobs of each run: both in one run (2-DoF), else one run per knob."""
-        return [tuple(KNOBS)] if self.knobs_together else [(k,) for k in KNOBS]
-
-    @property
-    def bent(self) -> bool:
-        """Whether the shaft is bent (there is a shift: Compensation+Shift runs)."""
-        return self.name != "straight"
-
-
-SCENARIOS: tuple[Scenario, ...] = (
-    Scenario("straight", "I", "periodic", "straight"),
-    Scenario("alpha=45", "I", "periodic", "alpha45"),
-    Scenario("alpha=90", "I", "periodic", "alpha90"),
-    Scenario(SCENARIO_2DOF, "II", "nonperiodic", "2dof"),
-)
-"""The four columns of Tables I and II, in the paper's order."""
-
-KNOBS = (1, 2)
-
-
-def sweep_path(data_dir: Path, catheter: str, knob: int) -> Path:
-    """Where a data directory keeps the identification sweep of ``knob``."""
-    return Path(data_dir) / catheter / f"sweep_knob{knob}.csv"
-
-
-def replay_path(data_dir: Path, catheter: str, scenario: Scenario, knob: int) -> Path:
-    """Where a data directory keeps the detection replay of ``knob`` under ``scenario``."""
-    return Path(data_dir) / catheter / f"replay_{scenario.file_tag}_knob{knob}.csv"
-
-
-def reference_path(data_dir: Path, motion: str) -> Path:
-    """Where a data directory keeps the reference trajectory of ``motion``."""
-    return Path(data_dir) / f"reference_{motion}.csv"
-
-
-def replay_motion() -> tuple[np.ndarray, np.ndarray]:
-    """The detection replay's knob motion: 0 -> +A -> -A -> 0 at constant speed. Returns (t, q)."""
-    a, v = REPLAY_AMPLITUDE, REPLAY_SPEED
-    n = int(round(4 * a / v * REPLAY_FS)) + 1
-    t = np.arange(n) / REPLAY_FS
-    s = v * t
-    q = np.where(s <= a, s, np.where(s <= 3 * a, 2 * a - s, s - 4 * a))
-    return t, q
-
-
-def record_sweep(catheter: VirtualCatheter, knob: int, seed: int = 0) -> Run:
-    """The identification sweep of one knob on the straight shaft (paper section II-C-2).
-
-    +-40 deg, 2 cycles, 40 deg/s peak, sampled at 1 kHz, with tip angle and motor current,
-    rounded to the recorder's resolution.
-    """
-    t, q = sweep(fs=SWEEP_FS)
-    run = simulate(catheter, t, {knob: q}, seed=_seed(seed, 1, knob),
-                   meta={"motion": "sweep", "controller": "none", "knob": knob})
-    return _quantize(run)
-
-
-def record_replay(catheter: VirtualCatheter, scenario: Scenario, knob: int, seed: int = 0) -> Run:
-    """A slow sweep of ``knob`` under the scenario's shape, for Algorithm 1 (the other knob at rest)."""
-    t, q = replay_motion()
-    tag = SCENARIOS.index(scenario)
-    run = simulate(catheter, t, {knob: q}, shape=scenario.shape(knob), seed=_seed(seed, 2, tag, knob),
-                   meta={"motion": "replay", "controller": "none", "knob": knob})
-    return _quantize(run)
-
-
-def reference_periodic() -> Run:
-    """The paper's periodic reference for knob 1 (60 deg, 0.04 Hz, 2 cycles, 100 Hz)."""
-    t, r = periodic()
-    return _quantize(Run({"t": t, "r1": r}, {"motion": "periodic"}))
-
-
-def reference_nonperiodic() -> Run:
-    """The paper's non-periodic 2-DoF reference: r2 runs twice as fast as r1 (100 s, 100 Hz)."""
-    t, r1 = nonperiodic(speed=1.0)
-    _, r2 = nonperiodic(speed=2.0)
-    return _quantize(Run({"t": t, "r1": r1, "r2": r2}, {"motion": "nonperiodic"}))
-
-
-SAMPLE_DATA = Path("sample_data")
-"""The repository's data directory, relative to its root (where ``hyst demo`` reads it)."""
-
-SAMPLE_DATA_SEED = 0
-"""The seed ``scripts/make_sample_data.py`` recorded the committed ``sample_data/`` with."""
-
-
-def default_data_dir(cwd: str | Path | None = None) -> Path | None:
-    """``sample_data/`` when the folder ``cwd`` (default: the current one) holds the demo's
-    recordings, else None: the demo then records them from the twin.
-
-    An installed ``hyst`` ships no data files: the recordings are seeded, so recording them again
-    gives the very same runs (:func:`sample_data_runs`; a test holds them to the committed files
-    byte for byte).
-    """
-    folder = Path(cwd) / SAMPLE_DATA if cwd is not None else SAMPLE_DATA
-    return folder if reference_path(folder, "periodic").is_file() else None
-
-
-def sample_data_runs(seed: int = SAMPLE_DATA_SEED) -> dict[Path, Run]:
-    """Every recording of the demo's data directory, keyed by its path relative to it.
-
-    What ``scripts/make_sample_data.py`` writes (with ``seed`` 0 the committed ``sample_data/``)
-    and what :func:`run_protocol` records itself when it has no data directory.
-    """
-    runs: dict[Path, Run] = {reference_path(Path(), "periodic"): reference_periodic(),
-                             reference_path(Path(), "nonperiodic"): reference_nonperiodic()}
-    for name in CALIBRATED_NAMES:
-        cat = calibrated_catheter(name)
-        for k in KNOBS:
-            runs[sweep_path(Path(), name, k)] = record_sweep(cat, k, seed)
-        for s in SCENARIOS:
-            for k in KNOBS:
-                runs[replay_path(Path(), name, s, k)] = record_replay(cat, s, k, seed)
-    return runs
-
-
-class _Source:
-    """Where the recordings come from: a data directory, or the twin directly."""
-
-    def __init__(self, data_dir: Path | None, seed: int) -> None:
-        self.data_dir = None if data_dir is None else Path(data_dir)
-        self.seed = seed
-        self.files: list[Path] = []
-        if self.data_dir is not None and not self.data_dir.is_dir():
-            raise DataError(f"{self.data_dir}: no such data directory (give a folder made by "
-                            f"scripts/make_sample_data.py, or none to record from the twin)")
-
-    def _read(self, path: Path, require: Sequence[str]) -> Run:
-        if not path.exists():
-            raise DataError(f"{path}: missing from the data directory "
-                            f"(make it with scripts/make_sample_data.py)")
-        self.files.append(path)
-        return read_run(path, require=require)
-
-    def sweep(self, cat: VirtualCatheter, knob: int) -> Run:
-        if self.data_dir is None:
-            return record_sweep(cat, knob, self.seed)
-        return self._read(sweep_path(self.data_dir, cat.name, knob), (f"q{knob}", f"c{knob}"))
-
-    def replay(self, cat: VirtualCatheter, scenario: Scenario, knob: int) -> Run:
-        if self.data_dir is None:
-            return record_replay(cat, scenario, knob, self.seed)
-        return self._read(replay_path(self.data_dir, cat.name, scenario, knob), (f"q{knob}", f"c{knob}"))
-
-    def reference(self, motion: str) -> Run:
-        if self.data_dir is None:
-            return reference_periodic() if motion == "periodic" else reference_nonperiodic()
-        need = ("r1",) if motion == "periodic" else ("r1", "r2")
-        return self._read(reference_path(self.data_dir, motion), need)
+from .. import metrics
+from ..compensation import compensate
+from ..diagnosis import diagnose as _diagnose
+from ..errors import DataError, ShiftDetectionError
+from ..identification import identify
+from ..io import Run
+from ..model import PAPER_OMEGA, Model
+from ..report.table import Table
+from ..shift import ReplayProbe, ShiftResult, detect_shift
+from .calibration import calibrated_catheter
+from .scenarios import (BEYOND_FACTOR, CONTROLLERS, DETECT_MAX_TRAVEL, DETECT_STEP, DIAGNOSED, KNOBS, PAPER_CELLS,
+                        PAPER_IMPROVEMENT, SCENARIOS, TOLERANCE, Scenario, _Source, _seed)
+from .twin import VirtualCatheter, simulate_motion, sweep
 
 
 # --------------------------------------------------------------------------------------------
@@ -482,7 +193,7 @@ class DiagnosisRow:
     effects : tuple of (str, mapping)
         The effects the diagnosis added, with their fitted parameters.
     true_effects : tuple of (str, mapping)
-        What the virtual catheter really has (:mod:`hystcli.calibration`), for comparison.
+        What the virtual catheter really has (:mod:`hystcli.sim.calibration`), for comparison.
     rmse_before, rmse_after : float
         Held-out (leave one run out) RMSE of the tip prediction without and with the effects (deg).
     holdout : str
@@ -583,7 +294,7 @@ class ExperimentResult:
         return sum(1 for c in self.cells for m in ("ptpe", "rmse") if c.ratio(m) is not None)
 
     def to_dict(self) -> dict:
-        from .io import model_to_dict
+        from ..io import model_to_dict
 
         return {
             "format": "hyst-demo",
@@ -665,7 +376,7 @@ def run_protocol(catheters: Sequence[str] = ("ice-a", "ice-b"), trials: int = 3,
     Parameters
     ----------
     catheters : sequence of str
-        Calibrated virtual catheters (:mod:`hystcli.calibration`).
+        Calibrated virtual catheters (:mod:`hystcli.sim.calibration`).
     trials : int
         Trials per (catheter, scenario, knob, controller); each has its own sensor noise.
     seed : int
@@ -865,203 +576,3 @@ def _catheter_dict(cat: VirtualCatheter) -> dict:
             "effects": [{"name": e.name, "params": dict(e.params)} for e in cat.default_effects]}
 
 
-# --------------------------------------------------------------------------------------------
-# rendering (pure text) and figures
-# --------------------------------------------------------------------------------------------
-_LABELS = metrics.CONTROLLER_LABELS
-
-
-def _pair(v: tuple[float, float | None] | None) -> str:
-    if v is None:
-        return "-"
-    return f"({v[0]:.1f}, {v[1]:.1f})" if v[1] is not None else f"({v[0]:.1f}, -)"
-
-
-def _ratio_text(c: Cell, metric: str) -> str:
-    r = c.ratio(metric)
-    if r is None:
-        return "-"
-    return f"{r:.2f} " + ("ok" if c.within(metric) else "MISS")
-
-
-def comparison_table(result: ExperimentResult, table: str) -> Table:
-    """Table I or II as rows: controller, shape, ours and the paper's (mean, std), ratio, mark."""
-    cols = ("controller", "shape", "ptpe_ours", "ptpe_paper", "ptpe_ratio", "rmse_ours", "rmse_paper",
-            "rmse_ratio")
-    heads = ("controller", "shaft shape", "PTPE ours", "PTPE paper", "ours/paper",
-             "RMSE ours", "RMSE paper", "ours/paper")
-    rows = []
-    # the paper's layout: one block of rows per controller, the shapes in order within it
-    order = {c: i for i, c in enumerate(CONTROLLERS)}
-    scen = {s.name: i for i, s in enumerate(SCENARIOS)}
-    cells = sorted((c for c in result.table(table) if c.controller in order),
-                   key=lambda c: (order[c.controller], scen.get(c.scenario, len(scen))))
-    for c in cells:
-        rows.append((_LABELS.get(c.controller, c.controller), c.scenario, _pair(c.ptpe), _pair(c.paper_ptpe),
-                     _ratio_text(c, "ptpe"), _pair(c.rmse), _pair(c.paper_rmse), _ratio_text(c, "rmse")))
-    for c in result.table(table):
-        if c.controller != "comp+shift":
-            continue
-        ours = c.improvement
-        paper = PAPER_IMPROVEMENT.get(c.scenario)
-
-        def imp(metric: str) -> str:
-            vals = [ours.get(b, {}).get(metric) for b in ("none", "comp")]
-            return " and ".join("-" if v is None else f"{v:.1f}" for v in vals)
-
-        def pimp(metric: str) -> str:
-            return "-" if paper is None else " and ".join(f"{v:g}" for v in paper[metric])
-
-        rows.append(("Improvement rate (%)", c.scenario, imp("ptpe"), pimp("ptpe"), "", imp("rmse"),
-                     pimp("rmse"), ""))
-    title = ("Table I: PTPE and RMSE for 1-DoF, periodic inputs" if table == "I"
-             else "Table II: PTPE and RMSE for 2-DoF, non-periodic inputs")
-    notes = (title,
-             "(mean, std) in deg over catheters x knobs x trials; paper: Kim & Mansi, Table " + table
-             + f"; ok = ours within {TOLERANCE:.0%} of the paper's mean; improvement rate of "
-               "Compensation+Shift against No Compensation and Compensation-Only")
-    return Table(cols, heads, tuple(rows), notes, keys=2)
-
-
-def _effects_text(effects: Sequence[tuple[str, Mapping[str, float]]], forms: Sequence[str] = ()) -> str:
-    # a form other than the family's first is named: deadzone(shift=...) is centre or centre-bend
-    if not effects:
-        return "none"
-    forms = tuple(forms) or ("",) * len(effects)
-    return ", ".join(f"{n}{f'[{f}]' if f else ''}(" + ", ".join(f"{k}={v:.3g}" for k, v in p.items()) + ")"
-                     for (n, p), f in zip(effects, forms))
-
-
-def beyond_table(result: ExperimentResult) -> Table:
-    """Beyond the paper: Compensation+Shift with the diagnosed model beside the paper's.
-
-    One row per bent scenario: the paper's Compensation+Shift RMSE and PTPE, ours, ours after
-    the diagnosis (``comp+shift+diag``), and the target (half the paper's RMSE). The notes name
-    the effects the diagnosis found per catheter beside the ones the catheter really has.
-    """
-    cols = ("scenario", "rmse_paper", "rmse_ours", "rmse_diag", "rmse_target", "met", "ptpe_paper",
-            "ptpe_ours", "ptpe_diag")
-    heads = ("shaft shape", "RMSE paper C+S", "RMSE ours C+S", "RMSE ours C+S+diagnosis", "target",
-             "met", "PTPE paper C+S", "PTPE ours C+S", "PTPE ours C+S+diagnosis")
-    rows = []
-    for scenario, c, target in result.beyond():
-        paper = PAPER_CELLS[("comp+shift", scenario)]
-        ours = result.cell("comp+shift", scenario)  # ran wherever the diagnosed controller did
-        rows.append((scenario, _pair(paper["rmse"]), _pair(ours.rmse), _pair(c.rmse), f"<= {target:.2f}",
-                     "yes" if c.rmse[0] <= target else "NO", _pair(paper["ptpe"]), _pair(ours.ptpe),
-                     _pair(c.ptpe)))
-    notes = ["Beyond the paper: Compensation+Shift (C+S) with the model `hyst diagnose` augmented",
-             "(mean, std) in deg; target: half the paper's C+S RMSE; the diagnosis is fitted on the "
-             "C+S runs, the diagnosed controller runs on fresh trials"]
-    for d in result.diagnoses:
-        notes.append(f"{d.catheter}: diagnosis of {d.runs} C+S runs added {_effects_text(d.effects, d.forms)}; "
-                     f"held-out tip RMSE {d.rmse_before:.2f} -> {d.rmse_after:.2f} deg ({d.holdout}); "
-                     f"the catheter has {_effects_text(d.true_effects)}")
-    return Table(cols, heads, tuple(rows), tuple(notes))
-
-
-def shift_table(result: ExperimentResult) -> Table:
-    """Algorithm 1 per catheter, scenario and knob: detected and true offsets."""
-    cols = ("catheter", "scenario", "knob", "offset", "offset_lo", "offset_hi", "true_offset", "error", "edge",
-            "edge_found_at", "true_edge", "edge_error", "travel")
-    heads = ("catheter", "scenario", "knob", "offset", "low", "high", "true offset", "error", "edge", "found at",
-             "true edge", "edge error", "travel")
-    rows = tuple((s.catheter, s.scenario, s.knob, s.result.offset, s.result.offset_lo, s.result.offset_hi,
-                  s.true_offset, s.error, s.result.edge, s.result.edge_found_at, s.true_edge,
-                  s.edge_error, s.result.travel) if s.result is not None else
-                 (s.catheter, s.scenario, s.knob, None, None, None, s.true_offset, None, "refused", None, None, None,
-                  None) for s in result.shifts)
-    return Table(cols, heads, rows, (
-        "Algorithm 1 on the replays",
-        "deg; low/high: the offset's 95 % interval; error = detected - true offset; edge error = found - true "
-        "edge (the search's own error; the offset is measured from where the sweep's current took the same "
-        "tendon up)"), keys=3)
-
-
-def _section(table: Table, fmt: str) -> str:
-    """One titled table: ``notes[0]`` is the title, ``notes[1]`` the note under it, any further
-    notes a list below that."""
-    title, note, *items = table.notes
-    body = Table(table.columns, table.headers, table.rows, keys=table.keys)
-    if fmt == "markdown":
-        listed = "".join(f"- {line}\n" for line in items)
-        return f"**{title}**\n\n" + format_markdown(body) + f"\n{note}\n" + (f"\n{listed}" if items else "")
-    width = TEXT_WIDTH
-    listed = "".join(textwrap.fill(line, width, initial_indent="  ", subsequent_indent="    ",
-                                   break_on_hyphens=False) + "\n" for line in items)
-    return (f"{title}\n\n" + format_text(body) + "\n"
-            + textwrap.fill(note, width, break_on_hyphens=False) + f"\n{listed}")
-
-
-def render(result: ExperimentResult, fmt: str = "table") -> str:
-    """Tables I and II beside the paper's values, the diagnosed controller beside the paper's
-    Compensation+Shift, and Algorithm 1's detections, as text (``table``, ``markdown``) or ``json``."""
-    if fmt == "json":
-        return result.to_json()
-    if fmt not in ("table", "markdown"):
-        raise DataError(f"unknown format {fmt!r}: choose among table, markdown, json")
-    tables = [comparison_table(result, "I"), comparison_table(result, "II"), beyond_table(result),
-              shift_table(result)]
-    parts = [_section(t, fmt) for t in tables if t.rows]
-    compared = result.compared()
-    summary = f"{compared - len(result.misses())}/{compared} paper values matched within {TOLERANCE:.0%}"
-    if result.beyond():
-        met = len(result.beyond()) - len(result.beyond_misses())
-        summary += f"; beyond the paper: {met}/{len(result.beyond())} diagnosed RMSE at most half the paper's"
-    parts.append(summary + "\n")
-    return "\n".join(parts)
-
-
-FIGURES = {"fig6_periodic_1dof": ("I", 1), "fig7_nonperiodic_2dof": ("II", None)}
-"""Figure files: the paper's Fig. 6 (1-DoF, one catheter, knob 1, each shape) and Fig. 7 (2-DoF)."""
-
-
-def figures(result: ExperimentResult, fmt: str = "png") -> dict[str, bytes]:
-    """Figures like the paper's Figs. 6 and 7 of the first catheter's first trial, as file bytes.
-
-    Keys are file names (``fig6_periodic_1dof.png``, ``fig7_nonperiodic_2dof.png``); a figure
-    whose scenarios were not run is left out.
-    """
-    if not result.runs:
-        return {}
-    first = result.runs[0].meta.get("catheter")
-    out = {}
-    for name, (table, knob) in FIGURES.items():
-        scen = {s.name for s in SCENARIOS if s.table == table}
-        sel = [r for r in result.runs
-               if r.meta.get("scenario") in scen and r.meta.get("catheter") == first
-               and r.meta.get("trial") == "1" and (knob is None or f"q{knob}" in r)]
-        if sel:
-            out[f"{name}.{fmt}"] = evaluation_figure(sel, fmt)
-    return out
-
-
-def write_outputs(result: ExperimentResult, out_dir: str | Path, with_figures: bool = True,
-                  fmt: str = "png") -> list[Path]:
-    """Write ``results.json``, ``tables.md`` and the figures into ``out_dir`` (atomically).
-
-    Returns the paths written.
-    """
-    out = Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise DataError(f"{out}: exists and is not a directory")
-    files: dict[str, bytes] = {"results.json": result.to_json().encode("utf-8"),
-                               "tables.md": render(result, "markdown").encode("utf-8")}
-    if with_figures:
-        files.update(figures(result, fmt))
-    out.mkdir(parents=True, exist_ok=True)
-    # every file or none: an error leaves the folder's old results whole, not half replaced
-    with all_or_none() as pending:
-        for name, data in files.items():
-            pending.write_bytes(out / name, data)
-    return [out / name for name in files]
-
-
-__all__ = [
-    "BEYOND_FACTOR", "CONTROLLERS", "Cell", "DIAGNOSED", "DiagnosisRow", "PAPER_CELLS", "beyond_table", "DETECT_MAX_TRAVEL", "ExperimentResult", "PAPER_IMPROVEMENT", "PAPER_TABLE_I",
-    "PAPER_TABLE_II", "SCENARIOS", "SCENARIOS_1DOF", "SCENARIO_2DOF", "Scenario", "ShiftRow", "TOLERANCE",
-    "comparison_table", "figures", "identify_catheter", "record_replay", "record_sweep",
-    "reference_nonperiodic", "reference_path", "reference_periodic", "render", "replay_motion",
-    "replay_path", "run_protocol", "SAMPLE_DATA", "SAMPLE_DATA_SEED", "default_data_dir", "sample_data_runs", "shift_table",
-    "sweep_path", "write_outputs",
-]

@@ -3,9 +3,9 @@
 This module owns the *values* of the virtual catheters the demo and the sample data use: their
 true hysteresis per knob, their tendon geometry (which sets the shift per shape, paper eqs. 1-4)
 and the unmodelled effects they have by default (docs/design.md section 8). The twin
-(:mod:`hystcli.twin`) owns the physics; this module only chooses numbers, each with the reason
+(:mod:`hystcli.sim.twin`) owns the physics; this module only chooses numbers, each with the reason
 it has its value. They were chosen so that the paper's whole protocol run through our own core
-(:func:`hystcli.experiment.run_protocol`, ``hyst demo``) lands within 30 % of every cell of the
+(:func:`hystcli.sim.experiment.run_protocol`, ``hyst demo``) lands within 30 % of every cell of the
 paper's Tables I and II (Kim & Mansi); ``hyst demo`` prints the side-by-side table.
 
 What drives each cell of the tables (this is how the values were chosen):
@@ -39,11 +39,11 @@ from dataclasses import replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
 
-from .errors import ModelError
-from .model import Geometry, KnobModel
+from ..errors import ModelError
+from ..model import Geometry, KnobModel
 
 if TYPE_CHECKING:  # the twin and the effects load numba and scipy: imported when a catheter is built
-    from .effects import Effect
+    from ..effects import Effect
     from .twin import VirtualCatheter
 
 
@@ -149,7 +149,7 @@ CALIBRATED_NAMES: tuple[str, ...] = tuple(_CALIBRATED)
 def calibrated_catheter(name: str) -> "VirtualCatheter":
     """The virtual catheter ``name`` with the calibrated parameters and default effects.
 
-    Built on the twin's plain catheter of the same letter (:func:`hystcli.twin.get_catheter`,
+    Built on the twin's plain catheter of the same letter (:func:`hystcli.sim.twin.get_catheter`,
     ``example-a`` for ``ice-a``: its sensors and motor-current model are kept);
     the knobs, the geometry and the default effects are replaced by this module's values.
 
@@ -171,7 +171,7 @@ def calibrated_catheter(name: str) -> "VirtualCatheter":
 
 def default_effects() -> "tuple[Effect, ...]":
     """The calibrated catheters' unmodelled effects, validated (see :data:`_DEFAULT_EFFECTS`)."""
-    from .effects import make_effect
+    from ..effects import make_effect
 
     return tuple(make_effect(name, **params) for name, params in _DEFAULT_EFFECTS)
 
