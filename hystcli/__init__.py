@@ -35,7 +35,7 @@ imports neither typer, rich nor matplotlib.
 1. foundation: errors, estimates, settings, names, filters;
 2. signal: conditioning and reading the motor current;
 3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
-4. io: runs and models in files, the importer of foreign logs;
+4. io: runs and models in files, the import of foreign logs (:mod:`hystcli.io`);
 5. effects: the effect chain around the hysteresis;
 6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
    reports (tables, formats, figures), checks of a data set;
@@ -62,7 +62,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("errors", "estimate", "settings", "names", "filters"),
     ("signal",),
     ("core", "model"),
-    ("io", "importer"),
+    ("io",),
     ("effects",),
     ("compensation", "stream", "stream_kernels", "safety", "metrics", "report", "inspection", "check"),
     ("identification", "shift", "diagnosis"),

@@ -28,7 +28,7 @@ Missing metadata never stops an evaluation: the value is ``"unknown"`` and a war
 from __future__ import annotations
 
 import json
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np

@@ -10,7 +10,7 @@ import pytest
 from hystcli.compensation import predict_tip
 from hystcli.diagnosis import diagnose
 from hystcli.identification import identify
-from hystcli.importer import ImportOptions, convert, get_preset
+from hystcli.io.importer import ImportOptions, convert, get_preset
 from hystcli.io import Run
 from hystcli.model import EffectSpec
 

@@ -87,14 +87,16 @@ def inverse_step(r, y, x, near_pos, far_pos, near_neg, far_neg, omega, h_pos, h_
     edge (the dead zone used up) leaves a line of slope ``2 omega`` between the two, solved there.
     """
     if r > y:
-        if overlap and far_pos > near_pos and h_pos + omega * (near_pos - far_pos) < r <= h_pos + omega * (far_pos - near_pos):
+        if (overlap and far_pos > near_pos
+                and h_pos + omega * (near_pos - far_pos) < r <= h_pos + omega * (far_pos - near_pos)):
             x = 0.5 * (far_pos + near_pos + (r - h_pos) / omega) + offset
         elif r > h_pos:
             x = near_pos + (r - h_pos) / omega + offset
         else:
             x = far_pos + (r - h_pos) / omega + offset
     elif r < y:
-        if overlap and far_neg < near_neg and h_neg + omega * (far_neg - near_neg) <= r < h_neg + omega * (near_neg - far_neg):
+        if (overlap and far_neg < near_neg
+                and h_neg + omega * (far_neg - near_neg) <= r < h_neg + omega * (near_neg - far_neg)):
             x = 0.5 * (far_neg + near_neg + (r - h_neg) / omega) + offset
         elif r < h_neg:
             x = near_neg + (r - h_neg) / omega + offset

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from ..errors import DeviceError, LinkError, SafetyStop
+from ..errors import DeviceError, SafetyStop
 from ..shift import ProbeSample
 from .driver import Device
 from .protocol import Sample

@@ -1,4 +1,5 @@
-"""What a diagnosis answers: its thresholds and the result types (WHERE, WHICH, HOW FAR, the verdict)."""
+"""What a diagnosis answers: its thresholds and the result types (WHERE, WHICH, HOW FAR, the
+verdict)."""
 from __future__ import annotations
 
 import math

@@ -1,4 +1,5 @@
-"""WHICH, fitted: the hold-out folds and the greedy forward selection of effects on the search's table."""
+"""WHICH, fitted: the hold-out folds and the greedy forward selection of effects on the search's
+table."""
 from __future__ import annotations
 
 import math

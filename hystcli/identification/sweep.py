@@ -14,7 +14,7 @@ import numpy as np
 
 from ..errors import IdentificationError
 from ..io import Run
-from ..signal.stretches import decimation_index, find_reversals
+from ..signal.stretches import find_reversals
 
 MIN_SAMPLES = 100
 """Fewest samples of a sweep :func:`check_sweep` accepts."""

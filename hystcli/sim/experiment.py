@@ -59,12 +59,11 @@ from ..errors import DataError, ShiftDetectionError
 from ..identification import identify
 from ..io import Run
 from ..model import PAPER_OMEGA, Model
-from ..report.table import Table
 from ..shift import ReplayProbe, ShiftResult, detect_shift
 from .calibration import calibrated_catheter
 from .scenarios import (BEYOND_FACTOR, CONTROLLERS, DETECT_MAX_TRAVEL, DETECT_STEP, DIAGNOSED, KNOBS, PAPER_CELLS,
                         PAPER_IMPROVEMENT, SCENARIOS, TOLERANCE, Scenario, _Source, _seed)
-from .twin import VirtualCatheter, simulate_motion, sweep
+from .twin import VirtualCatheter, simulate_motion
 
 
 # --------------------------------------------------------------------------------------------

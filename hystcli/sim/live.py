@@ -1,4 +1,5 @@
-"""The live twin: the virtual catheter stepped move by move, as a robot is (what `hyst sim-robot` serves)."""
+"""The live twin: the virtual catheter stepped move by move, as a robot is (what `hyst sim-robot`
+serves)."""
 from __future__ import annotations
 
 import math

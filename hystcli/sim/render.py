@@ -1,4 +1,5 @@
-"""The experiment's tables beside the paper's (text, Markdown) and its figures, and the files `hyst demo` writes."""
+"""The experiment's tables beside the paper's (text, Markdown) and its figures, and the files `hyst
+demo` writes."""
 from __future__ import annotations
 
 import textwrap

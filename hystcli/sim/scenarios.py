@@ -1,4 +1,5 @@
-"""The paper's protocol as data: its published values, the demo's settings, the shaft scenarios and the recordings (sweeps, replays, references) the experiment runs on."""
+"""The paper's protocol as data: its published values, the demo's settings, the shaft scenarios and
+the recordings (sweeps, replays, references) the experiment runs on."""
 from __future__ import annotations
 
 from dataclasses import dataclass

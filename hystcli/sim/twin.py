@@ -38,8 +38,6 @@ from typing import Mapping, Sequence
 import numpy as np
 from numba import njit
 
-from scipy import signal
-
 from ..core import kernel
 from ..effects import (ChainState, Effect, as_effects, contact_current, format_effects, tip_chain)
 from ..errors import DataError, ModelError
