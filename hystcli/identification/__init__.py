@@ -31,7 +31,8 @@ from ..io import Run
 from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
 from ..settings import DEFAULT, Settings
 from ..signal.condition import condition
-from ..signal.reading import CurrentReading, read_current
+from ..signal.reading import read_current
+from ..signal.result import CurrentReading
 from .sweep import MIN_SAMPLES, SweepCheck, check_sweep, find_reversals
 from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, fit_tip, systematic_misfit

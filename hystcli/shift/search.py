@@ -43,7 +43,8 @@ from ..io import Run
 from ..model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
-from ..signal.reading import _classify, orientation
+from ..signal.reading import _classify
+from ..signal.result import orientation
 from .probe import ProbeSample, ReplayExhausted, ReplayProbe, return_knob
 from .result import Evidence, ShiftResult
 
