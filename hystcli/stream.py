@@ -44,7 +44,8 @@ Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation 
 float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
 (the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
 :meth:`Compensator.steps` runs a knob without effects through the compiled kernel of
-:mod:`hystcli.core.kernel`. The stages themselves are :mod:`hystcli.stream_stages`'. ``bench/bench_stream.py`` measures both (docs/streaming.md).
+:mod:`hystcli.core.kernel`. The stages themselves are :mod:`hystcli.stream_stages`'.
+``bench/bench_stream.py`` measures both (docs/streaming.md).
 """
 from __future__ import annotations
 

@@ -19,13 +19,13 @@ COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, ma
            forms); the identity when the other knob is not given
 UNLAG      :class:`hystcli.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
                                                                   u, z, tp, dt, e, c
-HYST       ``_Hysteresis.step`` of hystcli/stream.py (edges       the knob's 8 kernel args, n,
-           moved by the deadzone couplings)                       (gain, magnitude) x n / y, x
+HYST       ``_Hysteresis.step`` of hystcli/stream_stages.py       the knob's 8 kernel args, n,
+           (edges moved by the deadzone couplings)                (gain, magnitude) x n / y, x
 LAG        :class:`hystcli.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
            other knob's coupling sees of a command)
-BEND       ``_Bend.step`` of hystcli/stream.py: the knob's base   the knob's 8 kernel args / y
-           model forward, its bend as the other knob's
-           magnitude coupling sees it
+BEND       ``_Bend.step`` of hystcli/stream_stages.py: the        the knob's 8 kernel args / y
+           knob's base model forward, its bend as the other
+           knob's magnitude coupling sees it
 =========  ===================================================  ===============================
 
 Every op does the same IEEE operations in the same order as its Python stage, so a step gives

@@ -33,8 +33,6 @@ from ..io import Run
 from ..model import Model
 from ..safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits, check_speed_mode
 
-_NAMES = ("t", "r1", "r2")
-
 
 # --------------------------------------------------------------------------------------------
 # the reference

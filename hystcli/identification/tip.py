@@ -66,7 +66,6 @@ N_STARTS = 10
 # theta = (d_neg, width, f_pos, f_neg, delta, omega, h_mid, z_init)
 _LO = np.array([-np.inf, 0.0, 0.0, 0.0, 0.0, 1e-3, -np.inf, -np.inf])
 _HI = np.array([np.inf, np.inf, 1.0, 1.0, np.inf, np.inf, np.inf, np.inf])
-_THETA = ("d_neg", "width", "f_pos", "f_neg", "delta", "omega", "h_mid", "z_init")
 
 
 # --------------------------------------------------------------------------------------------

@@ -106,10 +106,6 @@ class CurrentReading:
     stretches: tuple[StretchReading, ...] = field(default=(), repr=False)
     current_range: tuple[float, float] = (math.nan, math.nan)
 
-    def orient(self, direction: int) -> int:
-        """The factor that turns a current into load coordinates on a stretch going ``direction``."""
-        return orientation(self.sign, direction)
-
 
 def orientation(sign: str, direction: int) -> int:
     """``l = orientation * c`` is the load coordinate of a stretch moving ``direction``."""
