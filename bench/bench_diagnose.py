@@ -3,7 +3,7 @@
 The data are the size of the demo's experiment: 2 catheters x 3 shapes (straight, alpha=45,
 alpha=90) x 3 controllers (none, comp, comp+shift) x 3 trials of the paper's periodic run (60 deg,
 0.04 Hz, 50 s at 100 Hz), made by the twin with each calibrated catheter's default effects
-(hystcli.calibration). Diagnose refuses mixed catheters, so each catheter's
+(hystcli.sim.calibration). Diagnose refuses mixed catheters, so each catheter's
 27 runs are one diagnosis with leave-one-run-out (27 folds), against the catheter's true
 straight-shaft model; the figure is the sum of both (one process, one core), data generation
 excluded.
@@ -15,9 +15,10 @@ from __future__ import annotations
 import argparse
 import time
 
-from hystcli import compensation, twin
-from hystcli.calibration import calibrated_catheter
-from hystcli.diagnose import diagnose
+from hystcli import compensation
+from hystcli.sim import twin
+from hystcli.sim.calibration import calibrated_catheter
+from hystcli.diagnosis import diagnose
 from hystcli.io import Run
 from hystcli.model import Model, Shape
 

@@ -9,7 +9,8 @@ import time
 import numpy as np
 
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import live as live_twin
+from hystcli.sim import twin
 from hystcli.io import Run
 from hystcli.model import Model
 
@@ -36,7 +37,7 @@ def main() -> None:
         m = Model(CAT.knobs, CAT.geometry, effects=tuple(e.spec() for e in effs))
         ms = _time(lambda: E.predict(m, run), 20)
         print(f"  {'+'.join(names) or 'base model':60s} {ms:7.2f} ms")
-    live = twin.LiveTwin(CAT, seed=0)
+    live = live_twin.LiveTwin(CAT, seed=0)
     ms = _time(lambda: live.move(1, float(np.random.uniform(-30, 30))), 50)
     print(f"LiveTwin.move (~1000 samples at dt=1 ms, both knobs): {ms:.2f} ms")
 

@@ -12,8 +12,8 @@ from __future__ import annotations
 import math
 import time
 
-from hystcli import twin
-from hystcli.identify import identify
+from hystcli.sim import twin
+from hystcli.identification import identify
 
 DURATION_S = 600.0
 FS = 1000.0

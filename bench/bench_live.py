@@ -43,13 +43,13 @@ import numpy as np
 
 from hystcli.errors import ShiftDetectionError
 
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.device import (DEFAULT_DWELL, DEFAULT_MEAN, Device, DeviceProbe, decode_frame,
                             encode_frame, open_probe)
-from hystcli.emulator import DeviceEmulator
+from hystcli.device.emulator import DeviceEmulator
 from hystcli.model import KnobIdentification, Model, Shape
 from hystcli.shift import detect_shift
-from hystcli.twin import LiveTwin
+from hystcli.sim.live import LiveTwin
 
 N = 3000
 SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=180", "alpha=45,theta=0;alpha=45,theta=90")

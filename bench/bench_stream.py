@@ -19,7 +19,7 @@ import numpy as np
 
 import hystcli
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.model import Model
 
 CAT = twin.get_catheter("example-a")

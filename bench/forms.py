@@ -13,8 +13,9 @@ from __future__ import annotations
 import argparse
 import time
 
-from hystcli import effects as E, twin
-from hystcli.diagnose import diagnose
+from hystcli import effects as E
+from hystcli.sim import twin
+from hystcli.diagnosis import diagnose
 
 from withheld import data_set
 

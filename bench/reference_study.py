@@ -17,7 +17,7 @@ Coverage is given over every case (an open interval covers) and over the resolve
 Times are CPU seconds of the fitting process (``time.process_time``), medians per case.
 
 Run: ``python bench/reference_study.py --n 200 --jobs 2 [--only tip current shift]
-[--plants hystcli.zoo.plants | bench/plants/wild.py] [--seed 0] [--cases FILE]``;
+[--plants plants.zoo.plants | bench/plants/wild.py] [--seed 0] [--cases FILE]``;
 ``--report FILE...`` pools the cases of earlier ``--cases`` files and prints the tables.
 """
 from __future__ import annotations
@@ -175,7 +175,7 @@ def main(argv=None) -> int:
     ap.add_argument("--n", type=int, default=200)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--jobs", type=int, default=2)
-    ap.add_argument("--plants", default="hystcli.zoo.plants")
+    ap.add_argument("--plants", default="plants.zoo.plants")
     ap.add_argument("--only", nargs="+", choices=("tip", "current", "shift"), default=("tip", "current", "shift"))
     ap.add_argument("--cases", type=Path, default=None, help="write every case as a JSON line")
     ap.add_argument("--report", type=Path, nargs="+", default=None,

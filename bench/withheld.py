@@ -1,6 +1,6 @@
 """Withheld-effect study (issue 11, item 4): does `hyst diagnose` name an effect it was not built on?
 
-The catheters come from the independent zoo (:mod:`hystcli.zoo.catheters`): two-knob plants with
+The catheters come from the independent zoo (:mod:`plants.zoo.catheters`): two-knob plants with
 unmodelled effects written from the physics by an author who never read ``hystcli.effects``, in
 forms of their own (36 of them). Only the zoo's public API is used here: ``suite_specs``,
 ``make_case``, ``parse_run``-free run CSV text, and the effect *names* of a case for scoring.
@@ -64,11 +64,11 @@ def heldout_index(n: int) -> list[int]:
 
 def run_case(seed: int, effects: tuple) -> dict:
     """Identify, diagnose and score one zoo case (a plain dict, for the process pool)."""
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.errors import HystError
-    from hystcli.identify import identify
+    from hystcli.identification import identify
     from hystcli.io import parse_run
-    from hystcli.zoo import catheters as C
+    from plants.zoo import catheters as C
 
     t0 = time.perf_counter()
     case = C.make_case(seed, effects)
@@ -222,7 +222,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", default=None, help="write per-case results here")
     ap.add_argument("--verbose", action="store_true", help="one line per case on stderr")
     args = ap.parse_args(argv)
-    from hystcli.zoo import catheters as C
+    from plants.zoo import catheters as C
 
     specs = select(C.suite_specs(args.seed), args.only, args.n, args.quick)
     t0 = time.perf_counter()

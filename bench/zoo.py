@@ -1,7 +1,7 @@
 """Identification and shift detection on independent plants, scored per parameter, end to end.
 
 The plants come from modules written from the physics by authors who never read the code under
-test (``--plants zoo``: ``hystcli.zoo.plants``; ``--plants wild``: ``bench/plants/wild.py``, which
+test (``--plants zoo``: ``plants.zoo.plants``; ``--plants wild``: ``bench/plants/wild.py``, which
 breaks the premises the zoo shares with the method). Their records reach the code under test as
 run CSV text, as a user's logs would.
 
@@ -41,7 +41,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 from hystcli.errors import HystError  # noqa: E402
-from hystcli.identify import identify  # noqa: E402
+from hystcli.identification import identify  # noqa: E402
 from hystcli.io import parse_run  # noqa: E402
 from hystcli.shift import ReplayProbe, detect_shift  # noqa: E402
 
@@ -53,7 +53,7 @@ COMMANDS = ("identify-tip", "identify-current", "shift-tip", "shift-current")
 
 def plants_module(name: str):  # noqa: ANN201
     if name == "zoo":
-        return importlib.import_module("hystcli.zoo.plants")
+        return importlib.import_module("plants.zoo.plants")
     return importlib.import_module("plants.wild")
 
 

@@ -12,9 +12,41 @@ The Python surface (docs/design.md section 9)::
     c = hystcli.Compensator(m, dt=0.01)       # streaming, for a robot's own control loop
     q_t = c.step(r_t)                         # one sample in, one command out, causal
 
+    ident = hystcli.identify(sweep)           # -> Identification: .model, .intervals, .summary()
+    shift = hystcli.detect_shift(ident.model, replay, knob=1)  # -> ShiftResult (offset, interval)
+    comp = hystcli.compensate(model, reference)  # -> Compensation: .run, .warnings, .summary()
+    pred = hystcli.predict(model, run)        # -> Run, as Model.predict
+    report = hystcli.evaluate(runs)           # -> Evaluation: .groups, .summary()
+    diag = hystcli.diagnose(model, runs)      # -> Diagnosis: .model, .verdict, .summary()
+
+docs/library.md runs a whole session of these as a script.
+
 ``import hystcli`` loads only the error classes: every other name is imported on first use
 (module ``__getattr__``), so that ``hyst --help`` and a script that needs one function do not
 pay for numpy, pandas and numba up front.
+
+Layers
+------
+The package is cut in layers, :data:`LAYERS`, lowest first. A module imports only from its own
+layer or the ones below, never from a layer above, and no two modules import each other round a
+circle (tests/test_layers.py reads every import with ``ast`` and fails on either). The core
+imports neither typer, rich nor matplotlib.
+
+1. foundation: errors, estimates, settings, names, filters;
+2. signal: conditioning and reading the motor current;
+3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
+4. io: runs and models in files, the import of foreign logs (:mod:`hystcli.io`);
+5. effects: the effect chain around the hysteresis;
+6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
+   reports (tables, formats, figures), checks of a data set;
+7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
+8. device: the robot protocol, driver, probe, motions, tracking and emulator;
+9. studies: the twin, its calibrated catheters and the paper's experiment (:mod:`hystcli.sim`),
+   batches of runs;
+10. cli: the command line (options, one library call, rendering).
+
+One arrow goes up, on purpose: ``Model.predict`` and ``Model.compensate`` (the design's
+``m.predict(run)``) import :mod:`hystcli.compensation` when called; :data:`LATE_IMPORTS` names it.
 """
 from __future__ import annotations
 
@@ -26,16 +58,38 @@ from .errors import (DataError, DeviceError, HystError, IdentificationError, Lin
 
 __version__ = "0.1.0"
 
+LAYERS: tuple[tuple[str, ...], ...] = (
+    ("errors", "estimate", "settings", "names", "filters"),
+    ("signal",),
+    ("core", "model"),
+    ("io",),
+    ("effects",),
+    ("compensation", "stream", "stream_stages", "stream_kernels", "safety", "metrics", "report", "inspection",
+     "check"),
+    ("identification", "shift", "diagnosis"),
+    ("device",),
+    ("sim", "batch"),
+    ("cli", "__main__"),
+)
+"""The layers of the package, lowest first: each names the modules and subpackages directly under
+``hystcli`` that belong to it (the module notes)."""
+
+LATE_IMPORTS: frozenset[tuple[str, str]] = frozenset({("model", "compensation")})
+"""(importer, imported) pairs allowed to point up a layer, and only from inside a function."""
+
 # public name -> submodule that defines it (imported when the name is first asked for)
 _LAZY = {
     "Compensator": "stream", "Run": "io", "load_model": "io", "read_run": "io", "save_model": "io", "write_run": "io",
     "EffectSpec": "model", "Geometry": "model", "KnobModel": "model", "Model": "model", "Shape": "model",
+    "Settings": "settings", "identify": "identification", "detect_shift": "shift", "compensate": "compensation",
+    "predict": "compensation", "evaluate": "metrics", "diagnose": "diagnosis",
 }
 
 __all__ = [
     "Compensator", "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
-    "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Shape",
-    "ShiftDetectionError", "load_model", "read_run", "save_model", "write_run", "__version__",
+    "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Settings", "Shape",
+    "ShiftDetectionError", "compensate", "detect_shift", "diagnose", "evaluate", "identify", "load_model",
+    "predict", "read_run", "save_model", "write_run", "__version__",
 ]
 
 

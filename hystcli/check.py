@@ -9,7 +9,7 @@ cannot give what it is for). :func:`check_run` runs the physical checks on a run
 The physical checks read the data as identify does (:mod:`hystcli.signal`):
 
 - time: non-increasing steps (error); sample-rate jitter, the standard deviation of the time
-  steps over their median, and gaps longer than :data:`hystcli.importer.IRREGULAR` median steps
+  steps over their median, and gaps longer than :data:`hystcli.io.importer.IRREGULAR` median steps
   (warning beyond :data:`MAX_JITTER`);
 - a tip that never moves: the tip's robust range (1st to 99th percentile) under
   :data:`MIN_SIGNAL_TO_NOISE` times its noise, the noise estimated from second differences
@@ -43,7 +43,7 @@ import numpy as np
 from .errors import DataError, HystError
 from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run
 from .settings import CURRENT_SIGNS
-from .io import _parse_meta_line as _meta_line
+from .io.runs import _parse_meta_line as _meta_line
 
 ERROR = "error"
 WARNING = "warning"
@@ -200,7 +200,7 @@ def passes_an_edge(q: np.ndarray, c: np.ndarray) -> tuple[bool, int]:
 # --------------------------------------------------------------------------------------------
 def _time_problems(t: np.ndarray, linenos: np.ndarray) -> tuple[list[Problem], float | None, float | None]:
     """Non-increasing steps, jitter and gaps of a time column (finite values only)."""
-    from .importer import IRREGULAR
+    from .io.importer import IRREGULAR
 
     out: list[Problem] = []
     ok = np.isfinite(t)
@@ -421,8 +421,8 @@ def check_file(path: str | os.PathLike, columns: object = None, current_sign: st
     Parameters
     ----------
     path : path-like
-    columns : hystcli.importer.ImportMapping, optional
-        A ``--columns`` mapping (:func:`hystcli.importer.columns_mapping`): the file may then use
+    columns : hystcli.io.importer.ImportMapping, optional
+        A ``--columns`` mapping (:func:`hystcli.io.importer.columns_mapping`): the file may then use
         any separator and its own column names and units. Without one the file must be a run CSV:
         comma-separated, ``# key: value`` metadata lines, a header row of run column names.
     current_sign : {"auto", "signed", "magnitude"}
@@ -435,7 +435,7 @@ def check_file(path: str | os.PathLike, columns: object = None, current_sign: st
     CheckReport
         Never raises for a bad file: everything wrong is a :class:`Problem`.
     """
-    from . import importer
+    from .io import importer
 
     source = str(path)
     text, problems = _read_text(Path(path))
@@ -511,7 +511,7 @@ def _ordered(problems: list[Problem]) -> list[Problem]:
 
 
 def _missing_columns(targets: Sequence[str], names: Sequence[str], mapped: bool) -> list[Problem]:
-    from .importer import suggest_columns
+    from .io.importer import suggest_columns
 
     out = []
     if "t" not in targets:

@@ -54,6 +54,15 @@ class Compensation:
     catch_ups: dict = field(default_factory=dict)
     sent: MotionCheck | None = None
 
+    def summary(self) -> str:
+        """One line per knob (its commands' range and the offset they used), then the warnings."""
+        lines = []
+        for k, off in sorted(self.offsets.items()):
+            q = np.asarray(self.run[f"q{k}"], dtype=float)
+            lines.append(f"knob {k}: {q.size} commands in [{q.min():+.2f}, {q.max():+.2f}] deg, "
+                         f"offset {off:+.2f} deg" if q.size else f"knob {k}: no commands")
+        return "\n".join(lines + [f"warning: {w}" for w in self.warnings])
+
 
 def knobs_of(model: Model, run: Run, prefix: str, what: str, name: str | None = None) -> list[int]:
     """Knobs with a ``{prefix}<k>`` column in ``run``, each checked to be a knob of ``model``.

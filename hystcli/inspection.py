@@ -7,7 +7,7 @@ what identification learnt from the current (the slopes and level ``detect-shift
 effects ``diagnose`` added, the geometry. Two models of one catheter (straight against shifted,
 before against after diagnosis) differ in a few of these: :func:`diff_table` lines them up.
 
-Everything here returns plain data (:class:`hystcli.metrics.Table`, dicts) or figure bytes; the
+Everything here returns plain data (:class:`hystcli.report.table.Table`, dicts) or figure bytes; the
 command line renders it.
 """
 from __future__ import annotations
@@ -15,7 +15,8 @@ from __future__ import annotations
 from typing import Any, Sequence
 
 from .errors import DataError
-from .metrics import PLOT_FORMATS, Table, figure_bytes
+from .report.figures import PLOT_FORMATS, figure_bytes
+from .report.table import Table
 from .model import PARAM_NAMES, KnobModel, Model
 
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")

@@ -2,9 +2,10 @@
 
 This module owns the metrics (section III of the paper), their grouping over run metadata, the
 tables they make (plain data: columns and rows) and the pure-text formatters of those tables
-(aligned text, JSON, CSV, Markdown, a LaTeX tabular laid out like the paper's), plus the figure
-of time and input against output like the paper's Figs. 6 and 7. It never prints and never
-imports typer or rich: ``hystcli.cli.metrics_cmds`` prints what it returns.
+(JSON and a LaTeX tabular laid out like the paper's; the generic ones are
+:mod:`hystcli.report.table`'s, the figure like the paper's Figs. 6 and 7 is
+:mod:`hystcli.report.evaluation`'s). It never prints and never imports typer or rich:
+``hystcli.cli.metrics_cmds`` prints what it returns.
 
 Definitions (the paper's words, section III-A):
 
@@ -26,12 +27,8 @@ Missing metadata never stops an evaluation: the value is ``"unknown"`` and a war
 """
 from __future__ import annotations
 
-import csv
-import io as _io
 import json
-import re
-import textwrap
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -39,6 +36,8 @@ import numpy as np
 from .errors import DataError, HystError
 from .io import Run
 from .model import Shape
+from .report.table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
+                           format_text, latex_escape)
 
 UNKNOWN = "unknown"
 #: Metadata (and ``knob``) a group can be keyed on.
@@ -52,10 +51,6 @@ _CONTROLLER_ORDER = ("none", "comp", "comp+shift")
 _MOTION_ORDER = ("sweep", "periodic", "nonperiodic")
 CONTROLLER_LABELS = {"none": "No Compensation", "comp": "Compensation-Only",
                      "comp+shift": "Compensation+Shift", "comp+shift+diag": "Compensation+Shift+Diagnosis"}
-#: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
-CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}
-_EXTRA_COLOURS = ("tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
-GROUND_TRUTH_COLOUR = "black"
 
 
 # --------------------------------------------------------------------------------------------
@@ -274,6 +269,10 @@ class Evaluation:
             raise KeyError(f"{len(found)} groups match {values}")
         return found[0]
 
+    def summary(self) -> str:
+        """The groups' table as text (what ``hyst evaluate`` prints), then the warnings."""
+        return "\n".join([format_text(group_table(self))] + [f"warning: {w}" for w in self.warnings])
+
     def to_dict(self) -> dict:
         return {
             "format": "hyst-evaluation",
@@ -458,36 +457,13 @@ def evaluate_runs(runs: Sequence[Run], group_by: Iterable[str] = DEFAULT_GROUP_B
     return Evaluation(tuple(results), tuple(groups), group_by, tuple(warnings))
 
 
+evaluate = evaluate_runs
+"""The library's name of :func:`evaluate_runs` (``hystcli.evaluate(runs)``)."""
+
+
 # --------------------------------------------------------------------------------------------
 # tables: plain data, then pure-text formatters
 # --------------------------------------------------------------------------------------------
-Cell = str | int | float | None
-
-
-@dataclass(frozen=True)
-class Table:
-    """A table as plain data.
-
-    Attributes
-    ----------
-    columns : tuple of str
-        Machine names of the columns (CSV header).
-    headers : tuple of str
-        Human headers (text and Markdown).
-    rows : tuple of tuple
-        Cells: str, int, float or None (not applicable).
-    notes : tuple of str
-        Lines below the table.
-    keys : int
-        Leading columns that name a row: a text table too wide for its width repeats them beside
-        each slice of the other columns (:func:`format_text`).
-    """
-
-    columns: tuple[str, ...]
-    headers: tuple[str, ...]
-    rows: tuple[tuple[Cell, ...], ...]
-    notes: tuple[str, ...] = field(default=())
-    keys: int = 1
 
 
 def group_table(evaluation: Evaluation) -> Table:
@@ -524,102 +500,9 @@ def run_table(evaluation: Evaluation) -> Table:
     return Table(cols, heads, rows, ("PTPE and RMSE of y - r per run and knob, deg",), keys=2)
 
 
-def _cell_text(value: Cell, digits: int) -> str:
-    if value is None:
-        return "-"
-    if isinstance(value, float):
-        return f"{value:.{digits}f}"
-    return str(value)
-
-
-def _numeric(value: Cell) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-TEXT_WIDTH = 100
-"""Widest line of a text table: wider tables are cut into slices of columns, the row's key columns
-repeated beside each, and notes are wrapped."""
-
-
-def _slices(widths: Sequence[int], keys: int, width: int) -> list[list[int]]:
-    """Column indices of each slice of a text table: the key columns, then as many of the others as
-    fit ``width`` (at least one each)."""
-    keys = min(keys, len(widths))
-    base = sum(widths[:keys]) + 2 * keys
-    out: list[list[int]] = []
-    used = base
-    for j in range(keys, len(widths)):
-        if out and out[-1][keys:] and used + widths[j] > width:
-            used = base
-            out.append(list(range(keys)))
-        if not out:
-            out.append(list(range(keys)))
-        out[-1].append(j)
-        used += widths[j] + 2
-    return out or [list(range(len(widths)))]
-
-
-def format_text(table: Table, digits: int = 2, width: int = TEXT_WIDTH) -> str:
-    """Aligned plain text: strings left-aligned, numbers right-aligned, notes below.
-
-    A table wider than ``width`` comes in slices of columns one under the other, each with the
-    table's key columns (:attr:`Table.keys`); notes are wrapped to ``width``.
-    """
-    cells = [[_cell_text(v, digits) for v in row] for row in table.rows]
-    numeric = [any(_numeric(row[j]) for row in table.rows) for j in range(len(table.headers))]
-    widths = [max([len(h)] + [len(r[j]) for r in cells]) for j, h in enumerate(table.headers)]
-
-    def line(items: Sequence[str], cols: Sequence[int]) -> str:
-        return "  ".join(items[j].rjust(widths[j]) if numeric[j] else items[j].ljust(widths[j])
-                         for j in cols).rstrip()
-
-    out: list[str] = []
-    for cols in _slices(widths, table.keys, width):
-        if out:
-            out.append("")
-        out += [line(table.headers, cols), line(["-" * w for w in widths], cols)]
-        out += [line(r, cols) for r in cells]
-    if table.notes:
-        out += [""] + [wrapped for note in table.notes
-                       for wrapped in textwrap.wrap(note, width, break_on_hyphens=False) or [""]]
-    return "\n".join(out) + "\n"
-
-
-def format_markdown(table: Table, digits: int = 2) -> str:
-    """A GitHub Markdown table (numbers right-aligned)."""
-    numeric = [any(_numeric(row[j]) for row in table.rows) for j in range(len(table.headers))]
-
-    def esc(s: str) -> str:
-        return s.replace("|", "\\|")
-
-    out = ["| " + " | ".join(esc(h) for h in table.headers) + " |",
-           "|" + "|".join("---:" if n else "---" for n in numeric) + "|"]
-    out += ["| " + " | ".join(esc(_cell_text(v, digits)) for v in row) + " |" for row in table.rows]
-    return "\n".join(out) + "\n"
-
-
-def format_csv(table: Table) -> str:
-    """CSV with the machine column names; floats at full precision, empty where not defined."""
-    buf = _io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(table.columns)
-    for row in table.rows:
-        w.writerow(["" if v is None else (repr(v) if isinstance(v, float) else v) for v in row])
-    return buf.getvalue()
-
-
 def format_json(evaluation: Evaluation) -> str:
     """The whole evaluation (runs, groups, definitions, warnings) as JSON."""
     return json.dumps(evaluation.to_dict(), indent=2, allow_nan=False) + "\n"
-
-
-_LATEX_SPECIAL = {"\\": r"\textbackslash{}", "&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#",
-                  "_": r"\_", "{": r"\{", "}": r"\}", "~": r"\textasciitilde{}", "^": r"\textasciicircum{}"}
-
-
-def latex_escape(text: str) -> str:
-    """Escape LaTeX's special characters in plain text."""
-    return re.sub(r"[\\&%$#_{}~^]", lambda m: _LATEX_SPECIAL[m.group()], text)
 
 
 def _latex_shape(value: str) -> str:
@@ -663,7 +546,7 @@ def format_latex(evaluation: Evaluation, digits: int = 1) -> str:
     """
     gb = evaluation.group_by
     if "controller" not in gb or "shape" not in gb:
-        return _latex_long(group_table(evaluation), digits)
+        return format_latex_long(group_table(evaluation), digits)
     others = [f for f in gb if f not in ("controller", "shape")]
     blocks: dict[tuple[str, ...], list[GroupResult]] = {}
     for g in evaluation.groups:
@@ -708,47 +591,6 @@ def format_latex(evaluation: Evaluation, digits: int = 1) -> str:
     return "\n\n".join(out) + "\n"
 
 
-def _latex_long(table: Table, digits: int) -> str:
-    spec = "|" + "|".join("r" if any(_numeric(r[j]) for r in table.rows) else "l"
-                          for j in range(len(table.headers))) + "|"
-    lines = [r"\begin{tabular}{" + spec + "}", r"\hline",
-             " & ".join(latex_escape(h) for h in table.headers) + r" \\ \hline"]
-    for row in table.rows:
-        lines.append(" & ".join(latex_escape(_cell_text(v, digits)) for v in row) + r" \\")
-    lines += [r"\hline", r"\end{tabular}"]
-    return "\n".join(lines) + "\n"
-
-
-FORMATS = ("table", "json", "csv", "markdown", "latex")
-
-
-def format_table(table: Table, fmt: str = "table", digits: int = 2) -> str:
-    """Any :class:`Table` as text in ``fmt`` (one of :data:`FORMATS`).
-
-    JSON is ``{"columns": [...], "rows": [{column: value}], "notes": [...]}`` at full precision;
-    the other formats are those of the evaluation tables (``latex`` as one long tabular).
-    """
-    if fmt == "table":
-        return format_text(table, digits)
-    if fmt == "csv":
-        return format_csv(table)
-    if fmt == "markdown":
-        return format_markdown(table, digits)
-    if fmt == "latex":
-        return _latex_long(table, digits)
-    if fmt == "json":
-        rows = [dict(zip(table.columns, row)) for row in table.rows]
-        return json.dumps({"columns": list(table.columns), "rows": rows, "notes": list(table.notes)},
-                          indent=2, allow_nan=False, default=_json_scalar) + "\n"
-    raise ValueError(f"unknown format {fmt!r}: choose among {', '.join(FORMATS)}")
-
-
-def _json_scalar(obj: object) -> object:
-    if isinstance(obj, np.generic):
-        return obj.item()
-    raise TypeError(f"{type(obj).__name__} is not JSON serialisable")
-
-
 def render(evaluation: Evaluation, fmt: str = "table", per_run: bool = False) -> str:
     """The evaluation as text in ``fmt`` (one of :data:`FORMATS`).
 
@@ -767,143 +609,13 @@ def render(evaluation: Evaluation, fmt: str = "table", per_run: bool = False) ->
     if fmt == "markdown":
         return format_markdown(table)
     if fmt == "latex":
-        return _latex_long(table, 2)
+        return format_latex_long(table, 2)
     raise ValueError(f"unknown format {fmt!r}: choose among {', '.join(FORMATS)}")
 
 
-# --------------------------------------------------------------------------------------------
-# figure (the paper's Figs. 6 and 7)
-# --------------------------------------------------------------------------------------------
-PLOT_FORMATS = ("png", "pdf", "svg")
-
-
-def _controller_colour(name: str, extra: dict[str, str]) -> str:
-    if name in CONTROLLER_COLOURS:
-        return CONTROLLER_COLOURS[name]
-    if name not in extra:
-        extra[name] = _EXTRA_COLOURS[len(extra) % len(_EXTRA_COLOURS)]
-    return extra[name]
-
-
-PLOT_POINTS = 4000
-"""Samples per drawn line at most: a 420-pixel panel shows no more, and Agg renders 10 000-sample
-lines several times slower."""
-
-
-def _thin(*series: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Every k-th sample of each series (the last one kept), so a line has at most PLOT_POINTS."""
-    n = len(series[0])
-    if n <= PLOT_POINTS:
-        return series
-    idx = np.unique(np.r_[np.arange(0, n, int(np.ceil(n / PLOT_POINTS))), n - 1])
-    return tuple(np.asarray(s)[idx] for s in series)
-
-
-def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
-    """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as file bytes.
-
-    One column per (motion, shape, knob) present; in it, for each controller, one run (the first
-    catheter and trial, as the paper shows "one catheter"); top: ``r`` (ground truth, black) and
-    each controller's ``y`` against time; bottom: ``y`` against the input ``r``, with the ideal
-    ``y = r`` in black. Colours are the paper's: none blue, comp red, comp+shift green.
-
-    Parameters
-    ----------
-    runs : sequence of Run
-        As for :func:`evaluate_runs`.
-    fmt : str
-        ``png``, ``pdf`` or ``svg``.
-
-    Returns
-    -------
-    bytes
-    """
-    if fmt not in PLOT_FORMATS:
-        raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    entries = []
-    for i, run in enumerate(runs):
-        source = run.source or f"<run {i + 1}>"
-        meta = {n: (_meta_value(run, n) or UNKNOWN) for n in _META_FIELDS}
-        for k in _evaluable_knobs(run, source, []):
-            entries.append((meta, k, run))
-    entries.sort(key=lambda e: (_rank("catheter", e[0]["catheter"]), _rank("trial", e[0]["trial"])))
-    columns: dict[tuple[str, str, int], dict[str, Run]] = {}
-    for meta, k, run in entries:
-        col = columns.setdefault((meta["motion"], meta["shape"], k), {})
-        col.setdefault(meta["controller"], run)
-    order = sorted(columns, key=lambda c: (_rank("motion", c[0]), _rank("shape", c[1]), c[2]))
-    if not order:
-        raise DataError("nothing to draw: no run with a tip column y1 or y2 and its reference")
-    motions = {c[0] for c in order}
-
-    fig = Figure(figsize=(4.2 * len(order), 7.0), dpi=100)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(2, len(order), squeeze=False)
-    extra: dict[str, str] = {}
-    for j, ckey in enumerate(order):
-        motion, shape, k = ckey
-        by_ctrl = columns[ckey]
-        ctrls = sorted(by_ctrl, key=lambda c: _rank("controller", c))
-        top, bottom = axes[0][j], axes[1][j]
-        ref = by_ctrl[ctrls[0]]
-        # ground truth drawn last and dashed, so a controller that tracks it perfectly hides nothing
-        top.plot(*_thin(ref.t, ref[f"r{k}"]), color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
-                 label="ground truth (r)")
-        lo = min(float(np.min(by_ctrl[c][f"r{k}"])) for c in ctrls)
-        hi = max(float(np.max(by_ctrl[c][f"r{k}"])) for c in ctrls)
-        bottom.plot([lo, hi], [lo, hi], color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
-                    label="ground truth (y = r)")
-        for c in ctrls:
-            run = by_ctrl[c]
-            colour = _controller_colour(c, extra)
-            label = CONTROLLER_LABELS.get(c, c)
-            top.plot(*_thin(run.t, run[f"y{k}"]), color=colour, lw=1.4, label=label)
-            bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), color=colour, lw=1.4, label=label)
-        title = f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else "")
-        top.set_title(title, fontsize=9)
-        top.set_xlabel("time (s)")
-        top.set_ylabel(f"output angle y{k} (deg)")
-        bottom.set_xlabel(f"input angle r{k} (deg)")
-        bottom.set_ylabel(f"output angle y{k} (deg)")
-        for ax in (top, bottom):
-            ax.grid(True, lw=0.3)
-    # one legend for the whole figure: the first column (often the straight shaft) lacks the
-    # controllers that only the bent shapes run (Compensation+Shift, the diagnosed one)
-    legend: dict[str, object] = {}
-    for ax in axes[0]:
-        for handle, label in zip(*ax.get_legend_handles_labels()):
-            legend.setdefault(label, handle)
-    width, height = fig.get_size_inches()
-    ncol = min(len(legend), 5, max(2, int(width // 2.4)))   # a label is about 2.4 in wide
-    rows = -(-len(legend) // ncol)
-    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=ncol,
-               fontsize=8, frameon=False)
-    # fixed margins in inches rather than tight_layout, which draws the whole figure once more
-    # just to measure its labels (a second of the demo)
-    fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.15 / width, bottom=(0.75 + 0.2 * rows) / height,
-                        top=1.0 - 0.3 / height, wspace=0.85 / 4.2 / 0.8, hspace=0.65 / 3.0)
-    return figure_bytes(fig, fmt)
-
-
-def figure_bytes(fig: object, fmt: str) -> bytes:
-    """A matplotlib ``Figure`` as file bytes in ``fmt``, the same bytes for the same figure."""
-    import matplotlib
-
-    buf = _io.BytesIO()
-    # no date or version stamps and fixed SVG ids: the same data give the same bytes
-    stamp = {"png": {"Software": None}, "pdf": {"CreationDate": None, "Producer": None},
-             "svg": {"Date": None}}[fmt]
-    with matplotlib.rc_context({"svg.hashsalt": "hyst"}):
-        fig.savefig(buf, format=fmt, metadata=stamp)  # type: ignore[attr-defined]
-    return buf.getvalue()
-
-
 __all__ = [
-    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "FORMATS", "GROUP_FIELDS", "GroupResult", "figure_bytes",
-    "Improvement", "RunResult", "Table", "UNKNOWN", "evaluate_runs", "evaluation_figure",
-    "format_csv", "format_json", "format_latex", "format_markdown", "format_text", "group_table",
+    "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "GROUP_FIELDS", "GroupResult",
+    "Improvement", "RunResult", "UNKNOWN", "evaluate", "evaluate_runs",
+    "format_json", "format_latex", "group_table",
     "improvement", "mean_std", "parse_group_by", "ptpe", "render", "rmse", "run_table",
 ]

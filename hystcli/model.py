@@ -14,9 +14,8 @@ Symbols (paper eq. D_hats and eq. model_eqs)::
     Dhat_pos/neg   far edges of the dead zone -> dhat_pos, dhat_neg (derived)
     q_init         shift of the model         -> offset
 
-The forward and inverse loops are compiled with numba: they are sequential recursions (each output
-depends on the previous one), so vectorised numpy cannot express them, and a plain Python loop
-runs at a few million samples per second.
+The forward and inverse recursions themselves are :mod:`hystcli.core.kernel`'s (compiled with
+numba, loaded on the first prediction).
 """
 from __future__ import annotations
 
@@ -47,64 +46,6 @@ MAX_SEGMENT_BEND = 360.0
 # Tolerance of the validity checks: parameters that come out of a least-squares fit may sit on a
 # constraint to within rounding; anything beyond this is a real violation.
 _TOL = 1e-9
-
-
-# --------------------------------------------------------------------------------------------
-# compiled kernels
-# --------------------------------------------------------------------------------------------
-# The kernels are written in plain Python and compiled with numba on first use (not at import:
-# numba costs the command line a third of a second to start, and `hyst --help` needs no model).
-# The plain functions stay callable: they are the reference the tests hold the compiled ones to.
-# The envelopes are written out in each kernel (branch-free: h + omega * (min(u - a, 0) +
-# max(u - b, 0)), lines L2-L4 and L8-L6) so that the kernels call no other function.
-def _forward_py(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, out):
-    y = y0
-    for i in range(x.shape[0]):
-        u = x[i] - offset
-        lo = h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
-        hi = h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
-        if y < lo:
-            y = lo
-        if y > hi:
-            y = hi
-        out[i] = y
-    return y
-
-
-def _inverse_py(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, x0, out):
-    y = y0
-    x = x0
-    for i in range(r.shape[0]):
-        ri = r[i]
-        if ri > y:
-            # smallest u on the ascending envelope reaching ri: past the dead zone when above it
-            if ri > h_pos:
-                x = d_pos + (ri - h_pos) / omega + offset
-            else:
-                x = dhat_pos + (ri - h_pos) / omega + offset
-            y = ri
-        elif ri < y:
-            # largest u on the descending envelope reaching ri
-            if ri < h_neg:
-                x = d_neg + (ri - h_neg) / omega + offset
-            else:
-                x = dhat_neg + (ri - h_neg) / omega + offset
-            y = ri
-        out[i] = x
-    return y
-
-
-_COMPILED: dict = {}
-
-
-def _kernel(py_func):
-    """The numba-compiled ``py_func`` (compiled, or read from numba's on-disk cache, once)."""
-    fn = _COMPILED.get(py_func)
-    if fn is None:
-        from numba import njit
-
-        fn = _COMPILED[py_func] = njit(cache=True, fastmath=False)(py_func)
-    return fn
 
 
 def _check_finite(values: np.ndarray, where: str, what: str) -> None:
@@ -268,7 +209,9 @@ class KnobModel:
         if not math.isfinite(y0):
             raise ModelError(f"forward: the initial output y0 must be finite, got {y0}")
         out = np.empty_like(x)
-        _kernel(_forward_py)(x, *self._kernel_args(), float(y0), out)
+        from .core import kernel  # numba loads on the first prediction, not on import
+
+        kernel.forward(x, *self._kernel_args(), float(y0), out)
         return out
 
     def inverse(self, r: np.ndarray | Sequence[float], y0: float = 0.0,
@@ -304,7 +247,9 @@ class KnobModel:
         if q0 is None:
             q0 = self.holding_knob_angle(y0)
         out = np.empty_like(rr)
-        _kernel(_inverse_py)(rr, *self._kernel_args(), float(y0), float(q0), out)
+        from .core import kernel
+
+        kernel.inverse(rr, *self._kernel_args(), float(y0), float(q0), out)
         return out
 
     def holding_knob_angle(self, y: float) -> float:

@@ -19,7 +19,7 @@ the step at the speed limit and the knob arrives late), or rate-limit it (``limi
 it again as soon as the limits allow; :class:`CatchUp` says for how long the knob lagged.
 :func:`plan_motion` applies the choice to a whole trajectory.
 
-It owns no device I/O; :mod:`hystcli.robot` applies it on a live device.
+It owns no device I/O; :mod:`hystcli.device.robot` applies it on a live device.
 """
 from __future__ import annotations
 

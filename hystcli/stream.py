@@ -44,7 +44,8 @@ Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation 
 float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
 (the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
 :meth:`Compensator.steps` runs a knob without effects through the compiled kernel of
-:mod:`hystcli.model`. ``bench/bench_stream.py`` measures both (docs/streaming.md).
+:mod:`hystcli.core.kernel`. The stages themselves are :mod:`hystcli.stream_stages`'.
+``bench/bench_stream.py`` measures both (docs/streaming.md).
 """
 from __future__ import annotations
 
@@ -53,319 +54,16 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .effects import chain, kernels
-from .effects.base import Effect, Signals
+from .core import kernel as core_kernel
+from .effects import chain
 from .effects.registry import as_effects
 from .errors import DataError, ModelError
-from .model import KnobModel, Model, Shape, _inverse_py, _kernel
+from .model import Model, Shape
 from .safety import CatchUp, Limits, RateLimiter
+from .stream_stages import _Bend, _CompiledCoupling, _Hysteresis, _Knob
 
 LATENCY_MODES = ("delay", "ignore")
 """What a :class:`Compensator` does with a ``latency`` effect (see the module's notes)."""
-
-
-class _Hysteresis:
-    """The hysteresis inverse of docs/design.md section 3, one sample at a time (``_inverse_py`` and
-    ``inverse_edges_kernel`` of the batch path, in plain floats: the same operations)."""
-
-    __slots__ = ("kn", "offset", "d_pos", "d_neg", "dhat_pos", "dhat_neg", "omega", "h_pos", "h_neg",
-                 "y", "x", "fresh", "y0", "edges", "outputs", "k", "widen", "speed", "lead", "warnings", "tau")
-
-    def __init__(self, kn: KnobModel, k: int, edges: Sequence[Effect], outputs: Sequence[Effect],
-                 widen: float = 0.0, lead: float = 30.0, warnings: list[str] | None = None) -> None:
-        self.k = k
-        self.edges = tuple(edges)          # coupling that moves the dead zone (reads the other knob)
-        self.outputs = tuple(outputs)      # output stages: where the hysteresis starts behind a reading
-        # a backlash that widens with the knob's speed (rate form backlash): the plateau ends move
-        # apart by widen*|v|, v the speed estimate of the commands up to the previous sample
-        # (kernels.inverse_edges_kernel: the speed is (x - lag(x, tau)) / tau, its lag one LagStep)
-        self.widen = float(widen)
-        self.tau = float(kernels.inverse_speed_tau(self.widen))
-        self.speed = kernels.LagStep(self.tau)
-        self.lead = float(lead)
-        self.warnings = warnings
-        self.y0 = 0.0
-        self.set_knob(kn)
-        self.reset(0.0)
-
-    def set_knob(self, kn: KnobModel) -> None:
-        self.kn = kn
-        (self.offset, self.d_pos, self.d_neg, self.dhat_pos, self.dhat_neg, self.omega, self.h_pos,
-         self.h_neg) = kn._kernel_args()
-
-    def reset(self, y0: float) -> None:
-        self.fresh = True
-        self.y0 = float(y0)
-        self.y = self.x = 0.0
-        self.speed.reset()   # the speed estimate at rest
-
-    def _start(self, other: float | None) -> None:
-        # the hysteresis state behind the tip reading y0 at rest, as the batch inverse starts it
-        # (what the coupling sees of the other knob: its command, or its bend for the magnitude forms)
-        other_arr = None if other is None else np.array([other])
-        sig = Signals(self.k, None, other_arr, 0.0, 0.0, "stream", other_arr)
-        yh0 = self.y0
-        for e in reversed(self.outputs):
-            yh0 = e.type.at_rest(e, yh0, sig)
-        self.y = yh0
-        self.x = self.kn.holding_knob_angle(yh0)
-        self.fresh = False
-
-    def step(self, r: float, t: float, other: float | None = None) -> float:
-        if self.fresh:
-            self._start(other)
-        y = self.y
-        if r == y:
-            if self.widen != 0.0:
-                self.speed.step(self.x, t)
-            return self.x
-        # the dead-zone edges as the other knob moves them this sample (coupling)
-        b = a = 0.0
-        if other is not None:
-            for e in self.edges:
-                dp, dn = e.type.edges_at(e, other)
-                b += dp
-                a += dn
-        far_pos = self.dhat_pos + a
-        far_neg = self.dhat_neg + b
-        if self.widen != 0.0:
-            s = self.speed
-            v = 0.0 if s.fresh else (s.up - s.z) / self.tau
-            g = self.widen * abs(v)
-            far_pos = far_pos + g
-            far_neg = far_neg - g
-        xp = self.x
-        if r > y:
-            near = self.d_pos + b
-            h = self.h_pos
-            if far_pos > near and h + self.omega * (near - far_pos) < r <= h + self.omega * (far_pos - near):
-                self.x = 0.5 * (far_pos + near + (r - h) / self.omega) + self.offset
-            elif r > h:
-                self.x = near + (r - h) / self.omega + self.offset
-            else:
-                self.x = far_pos + (r - h) / self.omega + self.offset
-            self.y = r
-        elif r < y:
-            near = self.d_neg + a
-            h = self.h_neg
-            if far_neg < near and h + self.omega * (far_neg - near) <= r < h + self.omega * (near - far_neg):
-                self.x = 0.5 * (far_neg + near + (r - h) / self.omega) + self.offset
-            elif r < h:
-                self.x = near + (r - h) / self.omega + self.offset
-            else:
-                self.x = far_neg + (r - h) / self.omega + self.offset
-            self.y = r
-        if self.widen != 0.0:
-            x = self.x
-            if x > xp + self.lead or x < xp - self.lead:
-                # kernels.inverse_edges_kernel's lead limit, the same operations
-                x = self.x = xp + self.lead if x > xp else xp - self.lead
-                u = x - self.offset
-                lo = self.h_pos + self.omega * (min(u - far_pos, 0.0) + max(u - self.d_pos - b, 0.0))
-                hi = self.h_neg + self.omega * (min(u - self.d_neg - a, 0.0) + max(u - far_neg, 0.0))
-                y = lo if y < lo else y
-                y = hi if y > hi else y
-                self.y = y
-                if self.warnings is not None:
-                    self.warnings.append(chain._lead_warning(self.k, self.widen, self.lead))
-            self.speed.step(self.x, t)
-        return self.x
-
-    def save(self) -> tuple:
-        return (self.fresh, self.y, self.x, self.speed.save())
-
-    def load(self, s: tuple) -> None:
-        self.fresh, self.y, self.x, speed = s
-        self.speed.load(speed)
-
-    @property
-    def plain(self) -> bool:
-        """True when the compiled kernel of :mod:`hystcli.model` gives this stage's numbers."""
-        return not self.edges and self.widen == 0.0
-
-
-class _Bend:
-    """The forward hysteresis of docs/design.md section 3 one sample at a time (``_forward_py``: the
-    same operations): a knob's bend as its base model predicts it, what the other knob's
-    magnitude coupling reads (:mod:`hystcli.effects.coupling`)."""
-
-    __slots__ = ("kn", "y")
-
-    def __init__(self, kn: KnobModel) -> None:
-        self.kn = kn
-        self.y = 0.0
-
-    def reset(self, y0: float = 0.0) -> None:
-        self.y = float(y0)
-
-    def step(self, q: float, t: float = 0.0) -> float:
-        offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg = self.kn._kernel_args()
-        u = q - offset
-        lo = h_pos + omega * (min(u - dhat_pos, 0.0) + max(u - d_pos, 0.0))
-        hi = h_neg + omega * (min(u - d_neg, 0.0) + max(u - dhat_neg, 0.0))
-        y = self.y
-        if y < lo:
-            y = lo
-        if y > hi:
-            y = hi
-        self.y = y
-        return y
-
-    def save(self) -> float:
-        return self.y
-
-    def load(self, y: float) -> None:
-        self.y = y
-
-
-class _Knob:
-    """One knob's inverse chain: the steps before the first one that reads the other knob
-    (``head``), then the rest (``tail``), and what the other knob looks like to it (``seen``)."""
-
-    __slots__ = ("k", "head", "tail", "hyst", "seen")
-
-    def __init__(self, k: int, head: list, tail: list, hyst: _Hysteresis, seen: list) -> None:
-        self.k = k
-        self.head = head
-        self.tail = tail
-        self.hyst = hyst
-        self.seen = seen          # forward steps of this knob's command as the other knob's coupling sees it
-
-    def run(self, z: float, t: float, other: float | None) -> float:
-        for s in self.head:
-            z = s.step(z, t, None)
-        for s in self.tail:
-            z = s.step(z, t, other)
-        return z
-
-    def save_tail(self) -> tuple:
-        return tuple(s.save() for s in self.tail)
-
-    def load_tail(self, state: tuple) -> None:
-        for s, v in zip(self.tail, state):
-            s.load(v)
-
-    def reset(self, y0: float) -> None:
-        # (this knob's bend, as the other knob's coupling sees it, starts from its own tip y0)
-        for s in self.head + self.tail + self.seen:
-            if s is self.hyst or isinstance(s, _Bend):
-                s.reset(y0)
-            else:
-                s.reset()
-
-
-class _CompiledCoupling:
-    """The coupled tails of two knobs and what each knob's coupling sees of the other's command,
-    as the op table of :mod:`hystcli.stream_kernels`: the per-sample fixed point in one compiled
-    call. The table owns the state of those stages (the Python stage objects of the tails and of
-    ``seen`` then sit idle); the head stays in Python. Built only when every stage has an op."""
-
-    __slots__ = ("ops", "rng", "par", "st", "work", "kernel", "pending", "_params", "_fresh", "_hysts", "_bends")
-
-    @classmethod
-    def build(cls, c1: _Knob, c2: _Knob, plan: chain.Plan) -> "_CompiledCoupling | None":
-        # a hysteresis in a tail starts behind the tip reading through the output stages: done in
-        # Python on the first sample, exact only when no output stage reads the other knob there
-        if any(e.type.cross_knob(e) for e in plan.output) and any(
-                s is c.hyst for c in (c1, c2) for s in c.tail):
-            return None
-        # a backlash widened by the knob's speed has no op (its speed state): the Python passes
-        if any(c.hyst.widen != 0.0 and c.hyst in c.tail for c in (c1, c2)):
-            return None
-        table: list = []
-        rng = []
-        for stages in (c1.tail, c2.tail, c1.seen, c2.seen):
-            lo = len(table)
-            for s in stages:
-                if not cls._flatten(s, table):
-                    return None
-            rng += [lo, len(table)]
-        return cls(table, rng)
-
-    @staticmethod
-    def _flatten(s: Any, table: list) -> bool:
-        from . import stream_kernels as K
-        from .effects import kernels
-        from .effects.coupling import _CouplingStep
-
-        if isinstance(s, kernels.Cascade):
-            return all(_CompiledCoupling._flatten(x, table) for x in s.steps)
-        if isinstance(s, kernels.UnlagStep):
-            table.append((K.UNLAG, s))
-        elif isinstance(s, kernels.LagStep):
-            table.append((K.LAG, s))
-        elif isinstance(s, _CouplingStep):
-            table.append((K.COUPLE, s))
-        elif isinstance(s, _Hysteresis):
-            table.append((K.HYST, s))
-        elif isinstance(s, _Bend):
-            table.append((K.BEND, s))
-        else:
-            return False
-        return True
-
-    def __init__(self, table: list, rng: list) -> None:
-        from . import stream_kernels as K
-
-        self.kernel = K.coupled_step
-        n_par = n_st = 0
-        rows = []
-        for code, s in table:
-            rows.append((code, n_par, n_st))
-            n_par += {K.COUPLE: 3, K.UNLAG: 3, K.HYST: 9 + 2 * len(getattr(s, "edges", ())), K.LAG: 1,
-                      K.BEND: 8}[code]
-            n_st += K.STATE_SIZE[code]
-        self.ops, self.par, self.st, self.work = K.new_arrays(len(rows), n_par, n_st)
-        for i, row in enumerate(rows):
-            self.ops[i] = row
-        self.rng = np.asarray(rng, dtype=np.int64)
-        self._params = [(code, s, p) for (code, s), (_, p, _) in zip(table, rows)]
-        self._fresh = [(code, st) for (code, _), (_, _, st) in zip(table, rows) if code in (K.UNLAG, K.LAG)]
-        self._hysts = [(s, st) for (code, s), (_, _, st) in zip(table, rows) if code == K.HYST]
-        self._bends = [(s, st) for (code, s), (_, _, st) in zip(table, rows) if code == K.BEND]
-        self.load_params()
-        self.reset()
-
-    def load_params(self) -> None:
-        """The stages' parameters now (a new offset moves the hysteresis and a coupling's zero)."""
-        from . import stream_kernels as K
-
-        par = self.par
-        for code, s, p in self._params:
-            if code == K.COUPLE:
-                par[p:p + 3] = (s.gain, s.sign, 1.0 if s.eff.form.endswith("-magnitude") else 0.0)
-            elif code == K.BEND:
-                par[p:p + 8] = s.kn._kernel_args()
-            elif code == K.UNLAG:
-                par[p:p + 3] = (s.fraction, s.tau, s.lead)
-            elif code == K.LAG:
-                par[p] = s.tau
-            else:
-                par[p:p + 8] = s.kn._kernel_args()
-                par[p + 8] = len(s.edges)
-                for j, e in enumerate(s.edges):
-                    q = p + 9 + 2 * j
-                    par[q:q + 2] = (float(e["gain"]), 1.0 if e.form.endswith("-magnitude") else 0.0)
-
-    def reset(self) -> None:
-        """Every stage at rest (the lags start on their first input); the hysteresis starts on
-        the first sample (:meth:`start`)."""
-        self.st[:] = 0.0
-        for code, s in self._fresh:
-            self.st[s] = 1.0          # fresh
-            self.st[s + 4] = -1.0     # no sample interval seen yet
-        for b, s in self._bends:
-            self.st[s] = b.y          # a knob's bend starts from its tip reading (its _Bend's reset)
-        self.work[:] = self.st
-        self.pending = bool(self._hysts)
-
-    def start(self) -> None:
-        """The hysteresis state behind the tip reading at rest, as ``_Hysteresis`` starts it."""
-        for h, s in self._hysts:
-            h._start(None)
-            self.st[s] = h.y
-            self.st[s + 1] = h.x
-        self.pending = False
 
 
 class Compensator:
@@ -406,9 +104,14 @@ class Compensator:
 
     Examples
     --------
-    >>> c = Compensator(hystcli.load_model("shifted.json"), knobs=[1], dt=0.01)   # doctest: +SKIP
-    >>> for r in reference:                                                        # doctest: +SKIP
-    ...     robot.move(1, c.step(r))
+    >>> import hystcli
+    >>> m = hystcli.Model({1: hystcli.KnobModel(d_pos=5.0, d_neg=-5.0, b_pos=6.0, b_neg=6.0)})
+    >>> c = hystcli.Compensator(m, dt=0.01)
+    >>> q = [c.step(r) for r in (0.0, 2.0, 3.0, 2.5)]  # in a robot's loop: robot.move(1, c.step(r))
+    >>> [round(x, 3) for x in q]
+    [0.0, 6.379, 7.069, 0.724]
+    >>> [round(float(y), 9) for y in m.knob(1).forward(q)]  # the model follows the reference
+    [0.0, 2.0, 3.0, 2.5]
     """
 
     def __init__(self, model: Model, knobs: Sequence[int] | None = None, *, dt: float | None = None,
@@ -833,14 +536,14 @@ class Compensator:
             ch = self._chains[self._knobs[0]]
             timed = tt is not None or self.dt is not None or self._limiters is None
             if not ch.tail and ch.head == [ch.hyst] and ch.hyst.plain and timed and np.all(np.isfinite(rr)):
-                # the compiled kernel of hystcli.model: the same operations, so the same numbers
+                # the compiled kernel of hystcli.core.kernel: the same operations, so the same numbers
                 if tt is not None:
                     self._check_times(tt)
                 h = ch.hyst
                 if h.fresh:
                     h._start(None)
                 out = np.empty_like(rr)
-                h.y = float(_kernel(_inverse_py)(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
+                h.y = float(core_kernel.inverse(np.ascontiguousarray(rr), *h.kn._kernel_args(), h.y, h.x, out))
                 h.x = float(out[-1])
                 first = self._n
                 self._n += rr.size

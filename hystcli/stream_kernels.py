@@ -19,13 +19,13 @@ COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, ma
            forms); the identity when the other knob is not given
 UNLAG      :class:`hystcli.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
                                                                   u, z, tp, dt, e, c
-HYST       ``_Hysteresis.step`` of hystcli/stream.py (edges       the knob's 8 kernel args, n,
-           moved by the deadzone couplings)                       (gain, magnitude) x n / y, x
+HYST       ``_Hysteresis.step`` of hystcli/stream_stages.py       the knob's 8 kernel args, n,
+           (edges moved by the deadzone couplings)                (gain, magnitude) x n / y, x
 LAG        :class:`hystcli.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
            other knob's coupling sees of a command)
-BEND       ``_Bend.step`` of hystcli/stream.py: the knob's base   the knob's 8 kernel args / y
-           model forward, its bend as the other knob's
-           magnitude coupling sees it
+BEND       ``_Bend.step`` of hystcli/stream_stages.py: the        the knob's 8 kernel args / y
+           knob's base model forward, its bend as the other
+           knob's magnitude coupling sees it
 =========  ===================================================  ===============================
 
 Every op does the same IEEE operations in the same order as its Python stage, so a step gives
@@ -39,6 +39,8 @@ import math
 
 import numpy as np
 from numba import njit
+
+from .core import kernel
 
 COUPLE, UNLAG, HYST, LAG, BEND = 0, 1, 2, 3, 4
 """Op codes of the table (module notes)."""
@@ -125,29 +127,15 @@ def _run(lo, hi, z, t, other, has_other, ops, par, st, work):
                         half = 0.5 * par[q] * d
                         b += half
                         a += -half
-                if z > y:
-                    if z > h_pos:
-                        x = par[p + 1] + b + (z - h_pos) / omega + offset
-                    else:
-                        x = par[p + 3] + a + (z - h_pos) / omega + offset
-                else:
-                    if z < h_neg:
-                        x = par[p + 2] + a + (z - h_neg) / omega + offset
-                    else:
-                        x = par[p + 4] + b + (z - h_neg) / omega + offset
+                x = kernel.inverse_step(z, y, x, par[p + 1] + b, par[p + 3] + a, par[p + 2] + a, par[p + 4] + b,
+                                        omega, h_pos, h_neg, offset, False)
                 y = z
             work[s] = y
             work[s + 1] = x
             z = x
         elif code == 4:  # BEND
-            u = z - par[p]
-            lo = par[p + 6] + par[p + 5] * (min(u - par[p + 3], 0.0) + max(u - par[p + 1], 0.0))
-            hi = par[p + 7] + par[p + 5] * (min(u - par[p + 2], 0.0) + max(u - par[p + 4], 0.0))
-            y = st[s]
-            if y < lo:
-                y = lo
-            if y > hi:
-                y = hi
+            y = kernel.forward_step(st[s], z - par[p], par[p + 1], par[p + 2], par[p + 3], par[p + 4], par[p + 5],
+                                    par[p + 6], par[p + 7])
             work[s] = y
             z = y
         else:  # LAG

@@ -4,7 +4,7 @@
 Reads every ``load_freq/*.TXT.gz`` and ``pitch_*/*.TXT.gz`` of the MRDLab data set
 (``sample_data/real/PROVENANCE.md``; ``--src``, by default the folder ``shared/real/mrdlab``
 beside the repository) with the built-in ``mrdlab`` preset of
-:mod:`hystcli.importer`, resamples to 200 Hz (anti-alias low-pass first) and rounds to 4 decimals
+:mod:`hystcli.io.importer`, resamples to 200 Hz (anti-alias low-pass first) and rounds to 4 decimals
 so the whole copy stays a few MB, adds the condition metadata (``series``, ``setting`` in words,
 ``condition`` = ``load_pct`` (the driver of the condition effects), ``frequency_hz``,
 ``pitch_deg``; ``motion: periodic``; ``catheter: endowrist-tool5`` / ``endowrist-tool4``), writes
@@ -28,7 +28,7 @@ import numpy as np
 REPO = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(REPO))
 
-from hystcli import importer  # noqa: E402
+from hystcli.io import importer  # noqa: E402
 from hystcli.errors import HystError  # noqa: E402
 from hystcli.io import atomic_write_text, write_run  # noqa: E402
 

@@ -2,8 +2,8 @@
 """Write sample_data/: the recordings `hyst demo` runs the paper's experiment on.
 
 Seeded and deterministic: the same command writes the same bytes. Every recording comes from the
-calibrated virtual catheters (hystcli/calibration.py) through the very function the demo uses
-when it records from the twin itself (hystcli/experiment.py: sample_data_runs), so `hyst demo` on
+calibrated virtual catheters (hystcli/sim/calibration.py) through the very function the demo uses
+when it records from the twin itself (hystcli/sim/experiment.py: sample_data_runs), so `hyst demo` on
 these files, `hyst demo` where there are none (an installed hyst) and `hyst demo --simulate` give
 the same tables.
 
@@ -19,8 +19,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from hystcli.calibration import CALIBRATED_NAMES
-from hystcli.experiment import (REPLAY_AMPLITUDE, REPLAY_FS, REPLAY_SPEED, SCENARIOS, SWEEP_FS,
+from hystcli.sim.calibration import CALIBRATED_NAMES
+from hystcli.sim.scenarios import (REPLAY_AMPLITUDE, REPLAY_FS, REPLAY_SPEED, SCENARIOS, SWEEP_FS,
                                 sample_data_runs)
 from hystcli.io import atomic_write_text, write_run
 
@@ -36,7 +36,7 @@ def readme(seed: int) -> str:
     cats = ", ".join(f"`{c}`" for c in CALIBRATED_NAMES)
     return f"""# sample_data
 
-Recordings of the calibrated virtual catheters ({cats}; `hystcli/calibration.py`) that
+Recordings of the calibrated virtual catheters ({cats}; `hystcli/sim/calibration.py`) that
 `hyst demo` runs the paper's whole experiment on (Kim & Mansi, section III, Tables I and II).
 
 Made by (seeded, deterministic; the same command writes the same bytes):

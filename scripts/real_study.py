@@ -80,7 +80,7 @@ sys.path.insert(0, str(ROOT))
 
 from hystcli import effects as E  # noqa: E402
 from hystcli.compensation import predict_tip  # noqa: E402
-from hystcli.identify import identify  # noqa: E402
+from hystcli.identification import identify  # noqa: E402
 from hystcli.io import Run, atomic_write_text, read_run  # noqa: E402
 from hystcli.model import EffectSpec, Model  # noqa: E402
 
@@ -268,7 +268,7 @@ class Diag:
 
 
 def diagnose_condition(cond: Condition) -> Diag:
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
 
     model, _ = model_of(cond.series, cond.ident)
     runs = [run_of(cond.series, f) for f in cond.files]

@@ -32,7 +32,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
 from hystcli.compensation import predict_tip  # noqa: E402
-from hystcli.identify import identify  # noqa: E402
+from hystcli.identification import identify  # noqa: E402
 from hystcli.io import read_run  # noqa: E402
 from real_study import BE_NM_PER_COUNT, REAL, SETTLE_S, back_end_torque_counts  # noqa: E402
 

@@ -1,14 +1,15 @@
-"""The form-agnostic which stage (hystcli/attribution.py): the residual of a withheld effect is
+"""The form-agnostic which stage (hystcli/diagnosis/attribution.py): the residual of a withheld effect is
 attributed to the physical quantity that drives it, whatever the effect's form."""
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from hystcli import attribution as A
+from hystcli.diagnosis import attribution as A
 from hystcli import effects as E
-from hystcli import search as S
-from hystcli.diagnose import _folds, diagnose
+from hystcli.diagnosis import search as S
+from hystcli.diagnosis import diagnose
+from hystcli.diagnosis.select import _folds
 from test_diagnose import BASE, make_runs
 
 

@@ -6,7 +6,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hystcli import check, importer
+from hystcli import check
+from hystcli.io import importer
 from hystcli.check import ERROR, WARNING, Problem, check_file, check_run
 from hystcli.errors import DataError
 from hystcli.io import Run, read_run, write_run

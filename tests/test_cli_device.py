@@ -19,15 +19,16 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli import compensation
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
-from hystcli.emulator import Fault, serve
+from hystcli.device.emulator import Fault, serve
 from hystcli.io import Run, read_run, write_run
 from hystcli.model import Shape
-from hystcli.robot import Interrupted, play_trajectory
+from hystcli.device.robot import Interrupted, play_trajectory
 from hystcli.safety import LimitExceeded, Limits
-from hystcli.twin import LiveTwin, periodic, simulate
+from hystcli.sim.live import LiveTwin
+from hystcli.sim.twin import periodic, simulate
 from simrobot import TIMEOUT, interrupt_after, sim_robot, start_sim_robot, stop
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot` and `hyst simulate` serve as ice-a
@@ -518,7 +519,7 @@ def test_sweep_writes_the_papers_identification_sweep(tmp_path):
 def test_identify_on_a_sweep_played_on_the_robot(tmp_path):
     """Job 1 on a live robot: `hyst sweep`, `hyst play` on `hyst sim-robot`, `hyst identify` on
     the recording. The bare model (no unmodelled effects) is identified to within a few tenths of
-    a degree of the catheter's true knob 1: hystcli/calibration.py gives ice-a d_pos = -d_neg =
+    a degree of the catheter's true knob 1: hystcli/sim/calibration.py gives ice-a d_pos = -d_neg =
     18.8 deg, b_pos = b_neg = 9.88 deg, omega = 1.45."""
     sweep = tmp_path / "sweep_cmd.csv"
     assert runner.invoke(app, ["sweep", "-o", str(sweep), "--quiet"]).exit_code == 0

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.cli import app
 from hystcli.io import Run, load_model, model_to_dict, read_run, save_model, write_run
 from hystcli.model import Geometry, KnobModel, Model

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-import hystcli.io as io_mod
+import hystcli.io.runs as io_mod
 from hystcli.cli import app
 
 APP = sys.modules["hystcli.cli.app"]   # the module (hystcli.cli.app is the typer app)

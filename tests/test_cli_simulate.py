@@ -35,7 +35,7 @@ def test_periodic_run_with_effects_and_full_metadata(tmp_path):
                        "motion": "periodic", "trial": "2", "seed": "3",
                        "effects": "friction(mu=0.3);latency(delay=0.05)"}.items():
         assert run.meta[key] == value
-    # calibrated ice-b (hystcli/calibration.py): (180/pi) * 1.92 mm * (pi/2) / 6.5 mm
+    # calibrated ice-b (hystcli/sim/calibration.py): (180/pi) * 1.92 mm * (pi/2) / 6.5 mm
     # = 90 * 1.92 / 6.5 = 26.5846 deg (paper eq. 3)
     assert float(run.meta["true_offset1"]) == pytest.approx(90 * 1.92 / 6.5, abs=1e-6)
     assert np.array_equal(run["q1"], run["r1"])

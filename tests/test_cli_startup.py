@@ -10,8 +10,8 @@ import sys
 
 import pytest
 
-HEAVY = ("scipy", "pandas", "numba", "matplotlib", "rich", "hystcli.twin", "hystcli.effects",
-         "hystcli.identify", "hystcli.diagnose", "hystcli.experiment")
+HEAVY = ("scipy", "pandas", "numba", "matplotlib", "rich", "hystcli.sim.twin", "hystcli.effects",
+         "hystcli.identification", "hystcli.diagnosis", "hystcli.sim.experiment")
 
 
 def _python(code: str, *args: str, env: dict | None = None) -> subprocess.CompletedProcess:

@@ -13,12 +13,13 @@ import numpy as np
 import pytest
 from typer.testing import CliRunner
 
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.cli import app
-from hystcli.emulator import Fault, serve
+from hystcli.device.emulator import Fault, serve
 from hystcli.io import Run, read_run, save_model, write_run
 from hystcli.model import Model, Shape
-from hystcli.twin import LiveTwin, periodic, simulate
+from hystcli.sim.live import LiveTwin
+from hystcli.sim.twin import periodic, simulate
 from simrobot import TIMEOUT, interrupt_after, start_sim_robot, stop
 
 CAT = calibrated_catheter("ice-a")   # what `hyst sim-robot --catheter ice-a` serves

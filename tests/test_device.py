@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 from hystcli.device import (MAX_FRAME, Device, DeviceInfo, Frame, FrameError, Sample, crc8,
                             decode_frame, encode_frame, parse_pos)
-from hystcli.emulator import DeviceEmulator
+from hystcli.device.emulator import DeviceEmulator
 from hystcli.errors import DeviceError, HystError, LinkError
 
 

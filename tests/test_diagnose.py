@@ -12,8 +12,9 @@ from hypothesis import strategies as st
 
 from hystcli import compensation
 from hystcli import effects as E
-from hystcli import twin
-from hystcli.diagnose import MIN_GAIN_PCT, PHASES, _phase, diagnose
+from hystcli.sim import twin
+from hystcli.diagnosis import MIN_GAIN_PCT, PHASES, diagnose
+from hystcli.diagnosis.where import _phase
 from hystcli.errors import DataError, ModelError
 from hystcli.io import Run
 from hystcli.model import KnobModel, Model, Shape
@@ -71,6 +72,9 @@ def test_a_withheld_effect_is_named_fitted_and_shrinks_the_heldout_error(effect,
     # the augmented model carries it, after the model's own (none here)
     assert [e.name for e in d.model.effects][:1] == [effect.name]
     assert d.holdout.startswith("leave-one-run-out (4 folds)")
+    # the summary: the verdict, then the effect added with its fitted value
+    lines = d.summary().splitlines()
+    assert lines[0] == d.verdict and lines[1].startswith(f"added {effect.name}") and f"{param} = " in lines[1]
 
 
 def test_effect_free_data_reports_no_effect_and_describes_the_residual():
@@ -85,12 +89,13 @@ def test_effect_free_data_reports_no_effect_and_describes_the_residual():
     assert d.residual.rmse < 0.35
     assert abs(d.residual.autocorr_1s) < 0.2
     assert d.how_far.rmse_shrink_pct == 0.0
+    assert d.summary() == f"{d.verdict}\nno effect added"
 
 
 def test_the_figure_draws_small_shares_small():
     # effect-free runs: what the residual follows explains a few percent at most; on the figure's
     # 0-100 % axis such a bar stays a sliver, labelled with its value
-    from hystcli.diagnose import diagnosis_axes
+    from hystcli.diagnosis import diagnosis_axes
 
     runs = make_runs((), seed=2)
     d = diagnose(BASE, runs)

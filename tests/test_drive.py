@@ -1,17 +1,17 @@
-"""Where a delay sits (hystcli.drive): the sweep's motor current against its tip.
+"""Where a delay sits (hystcli.diagnosis.drive): the sweep's motor current against its tip.
 
-The catheters are the independent zoo's (hystcli.zoo.catheters, written without reading
-hystcli.effects or hystcli.drive); the case seeds are the withheld suite's design seeds (92xxx).
+The catheters are the independent zoo's (plants.zoo.catheters, written without reading
+hystcli.effects or hystcli.diagnosis.drive); the case seeds are the withheld suite's design seeds (92xxx).
 """
 from __future__ import annotations
 
 import pytest
 
-from hystcli import drive as D
-from hystcli.diagnose import diagnose
-from hystcli.identify import identify
+from hystcli.diagnosis import drive as D
+from hystcli.diagnosis import diagnose
+from hystcli.identification import identify
 from hystcli.io import parse_run
-from hystcli.zoo import catheters as C
+from plants.zoo import catheters as C
 
 
 def _case(cs: int):
@@ -107,7 +107,7 @@ def test_diagnose_names_the_input_lag_with_the_sweep(input_lag):
 def test_a_loop_refit_that_runs_off_keeps_the_models_loop(input_lag, monkeypatch):
     # withheld design seed 90 stopped the whole diagnosis with a ModelError: one grid point's loop
     # re-identification ran off to d_pos = 1.4e6 deg. Such a grid point keeps the model's loop.
-    from hystcli import refit as R
+    from hystcli.diagnosis import refit as R
     from hystcli.errors import ModelError
 
     real = R.refit

@@ -13,7 +13,7 @@ from typer.testing import CliRunner
 
 import hystcli
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.cli import app
 from hystcli.io import Run, read_run, save_model, write_run
 from hystcli.model import Model, Shape

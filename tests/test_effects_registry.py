@@ -10,7 +10,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.errors import ModelError
 from hystcli.io import load_model, save_model
 from hystcli.model import EffectSpec, Model

@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 
 import hystcli
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.effects import kernels
 from hystcli.effects.chain import ChainState, tip_chain
 from hystcli.io import Run
@@ -204,7 +204,7 @@ def test_streaming_with_a_coupling_gives_the_batch_inverses_commands():
 # --------------------------------------------------------------------------------------------
 def test_diagnose_names_the_viscous_backlash():
     from test_diagnose import BASE, make_runs
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
 
     d = diagnose(BASE, make_runs([_viscous(0.1)], seed=3), max_effects=1)
     assert [(s.name, s.effect().form) for s in d.selected] == [("rate", "backlash")]

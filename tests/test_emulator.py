@@ -15,9 +15,10 @@ import pytest
 import serial
 
 from hystcli.device import Device, DeviceProbe, crc8, decode_frame, encode_frame
-from hystcli.emulator import DeviceEmulator, Fault, PtyServer, serve
+from hystcli.device.emulator import DeviceEmulator, Fault, PtyServer, serve
 from hystcli.errors import DataError, DeviceError, LinkError, SafetyStop
-from hystcli.twin import LiveTwin, get_catheter
+from hystcli.sim.live import LiveTwin
+from hystcli.sim.twin import get_catheter
 
 CAT = get_catheter("example-a")
 
@@ -373,7 +374,7 @@ def test_the_reply_deadline_grows_by_the_dwell(server):
 # ------------------------------------------------------------------------------------------
 def test_handshake_announces_the_devices_limits(device):
     assert device.info.extra["travel"] == "170" and device.info.extra["max_speed"] == "1000"
-    from hystcli.robot import device_limits
+    from hystcli.device.robot import device_limits
 
     assert device_limits(device.info) == {"travel": 170.0, "max_speed": 1000.0}
 
@@ -429,10 +430,10 @@ def test_reply_deadline_grows_by_the_motion_the_host_asked_for(server):
 WARM_SCRIPT = r"""
 import sys
 import numba.core.dispatcher as dispatcher
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.device import Device
-from hystcli.emulator import serve
-from hystcli.twin import LiveTwin
+from hystcli.device.emulator import serve
+from hystcli.sim.live import LiveTwin
 
 server = serve(LiveTwin(calibrated_catheter("ice-a"), effects=None, seed=0))
 # from here on, any numba compilation or cache load (what made a fresh robot's first MOVE take
@@ -459,8 +460,8 @@ def test_a_served_twin_is_warm_before_its_first_move(warm):
     import sys
 
     script = WARM_SCRIPT if warm else WARM_SCRIPT.replace(
-        "from hystcli.emulator import serve",
-        "from hystcli.emulator import DeviceEmulator, serve\nDeviceEmulator.warm_up = lambda self: False")
+        "from hystcli.device.emulator import serve",
+        "from hystcli.device.emulator import DeviceEmulator, serve\nDeviceEmulator.warm_up = lambda self: False")
     res = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True, timeout=300)
     if warm:
         assert res.returncode == 0 and res.stdout.strip() == "ok", res.stderr

@@ -1,4 +1,4 @@
-"""The protocol runner behind `hyst demo` (hystcli/experiment.py) and the calibrated catheters."""
+"""The protocol runner behind `hyst demo` (hystcli/sim/experiment.py) and the calibrated catheters."""
 from __future__ import annotations
 
 import importlib.util
@@ -8,8 +8,10 @@ from pathlib import Path
 
 import pytest
 
-from hystcli import experiment as ex
-from hystcli.calibration import CALIBRATED_NAMES, DEFAULT_EFFECTS, calibrated_catheter
+from hystcli.sim import experiment as ex
+from hystcli.sim import render
+from hystcli.sim import scenarios as sc
+from hystcli.sim.calibration import CALIBRATED_NAMES, DEFAULT_EFFECTS, calibrated_catheter
 from hystcli.errors import DataError
 from hystcli.model import Shape
 
@@ -25,8 +27,8 @@ def small():
 
 @pytest.mark.slow
 def test_reduced_protocol_has_the_tables_structure(small):
-    t1 = [c for c in small.table("I") if c.controller != ex.DIAGNOSED]
-    t2 = [c for c in small.table("II") if c.controller != ex.DIAGNOSED]
+    t1 = [c for c in small.table("I") if c.controller != sc.DIAGNOSED]
+    t2 = [c for c in small.table("II") if c.controller != sc.DIAGNOSED]
     # Table I: none and comp at the straight shaft (comp+shift is the paper's "-"), all three
     # controllers at 45 and 90 deg; Table II: the three controllers.
     assert sorted((c.scenario, c.controller) for c in t1) == sorted(
@@ -34,8 +36,8 @@ def test_reduced_protocol_has_the_tables_structure(small):
         + [(s, c) for s in ("alpha=45", "alpha=90") for c in ("none", "comp", "comp+shift")])
     assert [c.controller for c in t2] == ["none", "comp", "comp+shift"]
     # beyond the paper: the diagnosed controller wherever comp+shift ran, with no paper value
-    diag = [c for c in small.cells if c.controller == ex.DIAGNOSED]
-    assert sorted(c.scenario for c in diag) == sorted(["alpha=45", "alpha=90", ex.SCENARIO_2DOF])
+    diag = [c for c in small.cells if c.controller == sc.DIAGNOSED]
+    assert sorted(c.scenario for c in diag) == sorted(["alpha=45", "alpha=90", sc.SCENARIO_2DOF])
     assert all(c.paper_rmse is None and c.ratio("rmse") is None for c in diag)
     # 1-DoF cells pool 1 catheter x 2 knobs x 1 trial; the 2-DoF run has both knobs in it
     assert all(c.n == 2 for c in small.cells)
@@ -51,7 +53,7 @@ def test_reduced_protocol_has_the_tables_structure(small):
 
 
 def test_compensation_with_shift_beats_compensation_only_on_bent_shapes(small):
-    for scen in ("alpha=45", "alpha=90", ex.SCENARIO_2DOF):
+    for scen in ("alpha=45", "alpha=90", sc.SCENARIO_2DOF):
         shift, only = small.cell("comp+shift", scen), small.cell("comp", scen)
         assert shift.rmse[0] < 0.7 * only.rmse[0], scen
         assert shift.ptpe[0] < only.ptpe[0], scen
@@ -80,25 +82,25 @@ def test_diagnosed_controller_beats_compensation_with_shift(small):
     assert row.rmse_after < 0.55 * row.rmse_before
     assert [e.name for e in small.augmented["ice-a"].effects] == [name for name, _ in row.effects]
     for scen in ("alpha=45", "alpha=90"):
-        diag, shift = small.cell(ex.DIAGNOSED, scen), small.cell("comp+shift", scen)
+        diag, shift = small.cell(sc.DIAGNOSED, scen), small.cell("comp+shift", scen)
         assert diag.rmse[0] < 0.5 * shift.rmse[0], scen
     # one trial has a single 2-DoF run: coupling shows only in it, so leaving that run out
     # leaves no evidence for it and the diagnosis rightly does not add it; the 2-DoF run still
     # gains from what the 1-DoF runs taught (the full demo, 3 trials, adds coupling)
     assert "coupling" not in {name for name, _ in row.effects}
-    assert small.cell(ex.DIAGNOSED, ex.SCENARIO_2DOF).rmse[0] < small.cell("comp+shift", ex.SCENARIO_2DOF).rmse[0]
+    assert small.cell(sc.DIAGNOSED, sc.SCENARIO_2DOF).rmse[0] < small.cell("comp+shift", sc.SCENARIO_2DOF).rmse[0]
     # its runs have fresh noise: never the same seed as a Compensation+Shift run
     seeds = lambda ctrl: {r.meta["seed"] for r in small.runs if r.meta["controller"] == ctrl}  # noqa: E731
-    assert seeds(ex.DIAGNOSED).isdisjoint(seeds("comp+shift"))
+    assert seeds(sc.DIAGNOSED).isdisjoint(seeds("comp+shift"))
 
 
 def test_protocol_without_diagnosis_runs_the_papers_three_controllers():
     res = ex.run_protocol(catheters=("ice-b",), trials=1, seed=0, scenarios=["alpha=45"], diagnose=False)
-    assert {c.controller for c in res.cells} == set(ex.CONTROLLERS)
+    assert {c.controller for c in res.cells} == set(sc.CONTROLLERS)
     assert res.diagnoses == () and res.beyond() == []
     # one run of comp+shift alone cannot be diagnosed (no run to hold out)
     with pytest.raises(DataError, match="at least two Compensation\\+Shift runs"):
-        ex.run_protocol(catheters=("ice-b",), trials=1, scenarios=[ex.SCENARIO_2DOF])
+        ex.run_protocol(catheters=("ice-b",), trials=1, scenarios=[sc.SCENARIO_2DOF])
 
 
 def test_detected_shift_is_near_the_geometry_of_the_shape(small):
@@ -118,7 +120,7 @@ def test_detected_shift_is_near_the_geometry_of_the_shape(small):
         d_true = {(1, "pos"): 18.8, (1, "neg"): -18.8, (2, "pos"): 17.8, (2, "neg"): -19.8}
         assert row.true_edge == pytest.approx(expected + d_true[(row.knob, row.result.edge)], abs=1e-5)
         assert abs(row.edge_error) < 0.75, row.to_dict()
-        assert row.result.travel <= ex.DETECT_MAX_TRAVEL
+        assert row.result.travel <= sc.DETECT_MAX_TRAVEL
 
 
 @pytest.mark.slow
@@ -137,12 +139,12 @@ def test_paper_constants_are_consistent_with_the_papers_improvement_rates():
     # recomputing it from the transcribed means checks the transcription. Table II's PTPE rate
     # against No Compensation (45.8) does not follow from its own means ((55.6-25.1)/55.6 = 54.9):
     # an inconsistency of the paper, left out.
-    papers = {**ex.PAPER_TABLE_I, **ex.PAPER_TABLE_II}
-    for scen, rates in ex.PAPER_IMPROVEMENT.items():
+    papers = {**sc.PAPER_TABLE_I, **sc.PAPER_TABLE_II}
+    for scen, rates in sc.PAPER_IMPROVEMENT.items():
         for metric, (vs_none, vs_comp) in rates.items():
             new = papers[("comp+shift", scen)][metric][0]
             for base_ctrl, rate in (("none", vs_none), ("comp", vs_comp)):
-                if scen == ex.SCENARIO_2DOF and metric == "ptpe" and base_ctrl == "none":
+                if scen == sc.SCENARIO_2DOF and metric == "ptpe" and base_ctrl == "none":
                     continue
                 base = papers[(base_ctrl, scen)][metric][0]
                 assert (base - new) / base * 100 == pytest.approx(rate, abs=0.7), (scen, metric, base_ctrl)
@@ -160,7 +162,7 @@ def test_bad_input_is_a_data_error(tmp_path):
 
 
 def test_write_outputs(tmp_path, small):
-    written = ex.write_outputs(small, tmp_path / "out")
+    written = render.write_outputs(small, tmp_path / "out")
     names = sorted(p.name for p in written)
     assert names == ["fig6_periodic_1dof.png", "fig7_nonperiodic_2dof.png", "results.json", "tables.md"]
     data = json.loads((tmp_path / "out" / "results.json").read_text())
@@ -169,7 +171,7 @@ def test_write_outputs(tmp_path, small):
     assert len(data["table_I"]) == 8 + 2 and len(data["table_II"]) == 3 + 1
     assert (tmp_path / "out" / "fig6_periodic_1dof.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     with pytest.raises(DataError, match="not a directory"):
-        ex.write_outputs(small, tmp_path / "out" / "results.json")
+        render.write_outputs(small, tmp_path / "out" / "results.json")
 
 
 def test_calibrated_catheters_have_physical_effects_only():
@@ -215,9 +217,9 @@ def test_full_demo_lands_within_30_percent_of_every_paper_cell():
     # Issue 5, Must-show 2: Compensation+Shift with the diagnosed model at most half the paper's
     # Compensation+Shift RMSE: 7.9 / 2 and 8.0 / 2 (Table I), 10.1 / 2 (Table II)
     targets = {s: t for s, _, t in res.beyond()}
-    assert targets == pytest.approx({"alpha=45": 3.95, "alpha=90": 4.0, ex.SCENARIO_2DOF: 5.05})
+    assert targets == pytest.approx({"alpha=45": 3.95, "alpha=90": 4.0, sc.SCENARIO_2DOF: 5.05})
     for s, target in targets.items():
-        assert res.cell(ex.DIAGNOSED, s).rmse[0] <= target, s
+        assert res.cell(sc.DIAGNOSED, s).rmse[0] <= target, s
     assert res.beyond_misses() == []
     # and the recordings read from the files are exactly what the twin records
     sim = ex.run_protocol(data_dir=None, trials=3, seed=0)

@@ -1,9 +1,9 @@
-"""Tests of hystcli.identify: the loop that predicts a sweep, each parameter with its interval, an
+"""Tests of hystcli.identification: the loop that predicts a sweep, each parameter with its interval, an
 interval (not a refusal) where the record cannot fix a parameter, walls, the current-only path
 and its refusal, the model file, the command line, sweep checks, determinism and the figure.
 
-References: the twin's true parameters (hystcli.twin's example catheters, the calibrated ice-a
-written out below), the independent plant zoo's truths (hystcli.zoo.plants), and currents and tips
+References: the twin's true parameters (hystcli.sim.twin's example catheters, the calibrated ice-a
+written out below), the independent plant zoo's truths (plants.zoo.plants), and currents and tips
 built in the tests; never an output of identify.
 """
 from __future__ import annotations
@@ -18,20 +18,20 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.cli import app
 from hystcli.errors import DataError, IdentificationError
-from hystcli.identify import check_sweep, find_reversals, identify, plot_identification
+from hystcli.identification import check_sweep, find_reversals, identify, plot_identification
 from hystcli.io import Run, load_model, parse_run, read_run, save_model, write_run
 from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
 from hystcli.settings import DEFAULT
-from hystcli.zoo import plants
+from plants.zoo import plants
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEP = ROOT / "sample_data" / "ice-a" / "sweep_knob1.csv"
 runner = CliRunner()
 
-# The calibrated ice-a's knob 1 (hystcli/calibration.py), written out so that the reference does
+# The calibrated ice-a's knob 1 (hystcli/sim/calibration.py), written out so that the reference does
 # not come from the code: dead zone +-18.8 deg, backlash 9.88 deg, omega 1.45, heights from the
 # taut-tendon rule h = omega (b_pos + b_neg) / 4 = 7.163 deg.
 ICE_A_1 = dict(d_pos=18.8, d_neg=-18.8, b_pos=9.88, b_neg=9.88, omega=1.45,
@@ -64,7 +64,7 @@ def truth_loop(params: dict, q: np.ndarray, y0: float) -> np.ndarray:
 # the sample sweep (the twin with its unmodelled effects) and the same protocol without them
 # --------------------------------------------------------------------------------------------
 def test_the_truth_written_here_is_the_calibrations():
-    from hystcli.calibration import calibrated_catheter
+    from hystcli.sim.calibration import calibrated_catheter
 
     got = calibrated_catheter("ice-a").knobs[1]
     for name, v in ICE_A_1.items():
@@ -107,7 +107,7 @@ def test_the_same_protocol_without_the_effects_is_recovered_within_every_interva
     # the calibrated ice-a's knob 1 on the paper's sweep (+-40 deg, 2 cycles, 40 deg/s, 1 kHz),
     # the tracker's noise and filter, no unmodelled effect: the loop is the truth, and every
     # interval holds it (measured: all seven, each within 0.03 deg)
-    from hystcli.calibration import calibrated_catheter
+    from hystcli.sim.calibration import calibrated_catheter
 
     t, q = twin.sweep()
     run = twin.simulate(calibrated_catheter("ice-a"), t, {1: q}, seed=5, effects=())

@@ -1,4 +1,4 @@
-"""Tests of hystcli.importer on a committed real excerpt (tests/data/mrdlab) and on small synthetic logs.
+"""Tests of hystcli.io.importer on a committed real excerpt (tests/data/mrdlab) and on small synthetic logs.
 
 Reference values are read by hand from the raw rows of the excerpt (quoted in the comments) and
 converted with the scales of sample_data/real/PROVENANCE.md: input = counts * 360/8192 deg,
@@ -18,9 +18,9 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hystcli import importer
+from hystcli.io import importer
 from hystcli.errors import DataError
-from hystcli.importer import ColumnMap, ImportMapping, ImportOptions
+from hystcli.io.importer import ColumnMap, ImportMapping, ImportOptions
 from hystcli.io import format_run, parse_run
 
 DATA = Path(__file__).parent / "data" / "mrdlab"
@@ -491,7 +491,7 @@ def test_any_plain_log_converts_the_same_by_either_reader(tmp_path_factory, rows
     mapping = dataclasses.replace(SIMPLE, separator=None if sep == " " else sep)
     p = tmp_path_factory.mktemp("log") / "log.txt"
     p.write_text(text, newline="")
-    with mock.patch("hystcli.importer._parse_table", side_effect=AssertionError("read line by line")):
+    with mock.patch("hystcli.io.importer._parse_table", side_effect=AssertionError("read line by line")):
         fast = importer.convert(p, mapping)   # a plain log goes through the CSV parser only
     _same(fast, importer.convert_text(text, mapping, source=str(p)))
 
@@ -499,7 +499,7 @@ def test_any_plain_log_converts_the_same_by_either_reader(tmp_path_factory, rows
 def test_the_real_excerpt_streams_through_the_csv_parser_from_gzip():
     """The committed MRDLab excerpt (gzip, '%' header lines, commas): read on the fly by the CSV
     parser, to the same run and report as the line reader's."""
-    with mock.patch("hystcli.importer._parse_table", side_effect=AssertionError("read line by line")):
+    with mock.patch("hystcli.io.importer._parse_table", side_effect=AssertionError("read line by line")):
         fast = importer.convert(LOAD41, MRD)
     _same(fast, importer.convert_text(importer.read_text(LOAD41), MRD, source=str(LOAD41)))
 

@@ -404,7 +404,7 @@ def test_any_good_run_reads_the_same_in_blocks(tmp_path, rows, crlf, meta):
         f"{a!r},{r[1]!r},{r[2]!r}\n" for a, r in zip(t.tolist(), rows))
     data = text.replace("\n", "\r\n").encode() if crlf else text.encode()
     (tmp_path / "run.csv").write_bytes(data)
-    with mock.patch("hystcli.io.parse_run", side_effect=AssertionError("read twice")):
+    with mock.patch("hystcli.io.runs.parse_run", side_effect=AssertionError("read twice")):
         fast = read_run(tmp_path / "run.csv")  # in blocks: a good file needs no second reading
     slow = parse_run(data.decode(), require=())
     assert dict(fast.meta) == dict(slow.meta)
@@ -413,7 +413,7 @@ def test_any_good_run_reads_the_same_in_blocks(tmp_path, rows, crlf, meta):
 
 
 def test_a_big_file_is_read_in_blocks_with_progress_and_without_parse_run(tmp_path, monkeypatch):
-    import hystcli.io as io_mod
+    import hystcli.io.runs as io_mod
 
     monkeypatch.setattr(io_mod, "READ_CHUNK_ROWS", 7)
     monkeypatch.setattr(io_mod, "READ_PROGRESS_BYTES", 0)
@@ -453,7 +453,7 @@ def test_a_run_is_written_as_pandas_writes_it(rows, meta):
 
 
 def test_a_long_run_is_written_in_pieces_that_read_back(tmp_path, monkeypatch):
-    import hystcli.io as io_mod
+    import hystcli.io.runs as io_mod
 
     monkeypatch.setattr(io_mod, "_WRITE_ROWS", 3)
     run = Run({"t": np.arange(10) / 7, "q1": np.sin(np.arange(10))}, {"motion": "sweep"})

@@ -16,7 +16,7 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from hystcli.calibration import calibrated_catheter
+from hystcli.sim.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
 from hystcli.estimate import Estimate
@@ -27,7 +27,7 @@ from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - t
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot --catheter ice-a` serves
 runner = CliRunner()
 
-# The calibrated ice-a's tendon geometry (hystcli/calibration.py: tendons 1.83 mm off the shaft
+# The calibrated ice-a's tendon geometry (hystcli/sim/calibration.py: tendons 1.83 mm off the shaft
 # axis, a 6 mm knob pulley). Written out here so that the reference below does not come from the
 # code under test; test_geometry_is_the_one_the_reference_uses notices a recalibration.
 BETA_CATHETER_MM, BETA_KNOB_MM = 1.83, 6.0
@@ -230,10 +230,10 @@ def test_contact_spike_live_probe_safety_stop():
     current (no-load 120 mA + k_load(1+mu) 5 mA/deg x 25 deg past an edge ~ 250 mA) and under
     the 2000 mA ceiling's check -> SafetyStop, motors stopped, knob back at 0 deg."""
     from hystcli.device import open_probe
-    from hystcli.emulator import Fault, serve
+    from hystcli.device.emulator import Fault, serve
     from hystcli.errors import SafetyStop
     from hystcli.shift import detect_shift
-    from hystcli.twin import LiveTwin
+    from hystcli.sim.live import LiveTwin
 
     server = serve(LiveTwin(CAT, seed=1), faults=[Fault("spike", 5, 1, "5000")])
     try:
@@ -284,8 +284,8 @@ def test_bad_baud_is_a_usage_error(model_path, tmp_path):
 def test_one_connection_for_every_knob(model_path, tmp_path):
     """Both knobs are searched over one connection: one handshake (the port used to be opened,
     and the device greeted, once per knob)."""
-    from hystcli.emulator import serve
-    from hystcli.twin import LiveTwin
+    from hystcli.device.emulator import serve
+    from hystcli.sim.live import LiveTwin
 
     server = serve(LiveTwin(CAT, seed=2))
     try:

@@ -1,6 +1,6 @@
 """The live path on plants our code did not make.
 
-An independent plant of :mod:`hystcli.zoo.plants` (written from the physics by an author who
+An independent plant of :mod:`plants.zoo.plants` (written from the physics by an author who
 never read hystcli.shift) is served by the serial emulator on a real pseudo-terminal; the host's
 driver and probe search it with the model a user would have: ``identify`` from the motor current
 of that plant's straight sweep. The decisions are the ones the replays go through (one search
@@ -9,18 +9,23 @@ true shift, or the search refuses with the reason; the knob ends where it began 
 """
 from __future__ import annotations
 
+from pathlib import Path
+
 import pytest
 from typer.testing import CliRunner
 
 from hystcli.cli import app
 from hystcli.device import open_probe
-from hystcli.emulator import serve
+from hystcli.device.emulator import serve
 from hystcli.errors import ShiftDetectionError
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run, load_model, parse_run, save_model
 from hystcli.shift import detect_shift
-from hystcli.zoo import plants
+from plants.zoo import plants
 from simrobot import TIMEOUT, sim_robot
+
+LIVE = Path(__file__).resolve().parents[1] / "bench" / "plants" / "live.py"
+"""The file `hyst sim-robot --plant` loads the zoo's live plant from (the plants are not installed)."""
 
 runner = CliRunner()
 
@@ -80,13 +85,13 @@ def test_live_search_refuses_an_edge_it_cannot_place(seed, direction):
 
 @pytest.mark.slow
 def test_detect_shift_on_sim_robot_serving_an_independent_plant(tmp_path):
-    # the command line against `hyst sim-robot --zoo` in its own process, as a user runs it, on
+    # the command line against `hyst sim-robot --plant bench/plants/live.py` in its own process, as a user runs it, on
     # the tip-load plant the search reads right both ways
     seed = LIVE_RIGHT[0].values[0]
     case = plants.replay_case(seed)
     save_model(tmp_path / "model.json", sweep_model(case))
     out = tmp_path / "shifted.json"
-    with sim_robot("--zoo", f"{seed}:{case.family}:{case.offset!r}") as port:
+    with sim_robot("--plant", f"{LIVE}:{seed}:{case.family}:{case.offset!r}") as port:
         res = runner.invoke(app, ["detect-shift", "--model", str(tmp_path / "model.json"), "--port", port,
                                   "-o", str(out), "--timeout", TIMEOUT, "-q"])
     assert res.exit_code == 0, res.output

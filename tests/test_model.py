@@ -9,7 +9,7 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import ModelError
-from hystcli import model as model_mod
+from hystcli.core import kernel
 from hystcli.model import Geometry, KnobModel, Model, Shape, rotate_offsets
 
 # docs/design.md section 6's example knob.
@@ -247,23 +247,44 @@ def test_forward_and_inverse_refuse_non_finite_input_naming_the_sample(bad):
         knob.forward(np.zeros(3), y0=float(bad))
 
 
+def _plain_forward(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, out):
+    # the forward recursion from the kernel's one-sample functions run as plain Python (the
+    # streaming compensator's path)
+    y = y0
+    for i in range(x.shape[0]):
+        u = x[i] - offset
+        lo, hi = kernel.envelopes_py(u - dhat_pos, u - d_pos, u - d_neg, u - dhat_neg, omega, h_pos, h_neg)
+        y = out[i] = kernel.clamp_py(y, lo, hi)
+    return y
+
+
+def _plain_inverse(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_pos, h_neg, y0, x0, out):
+    y, x = y0, x0
+    for i in range(r.shape[0]):
+        x = out[i] = kernel.inverse_step_py(r[i], y, x, d_pos, dhat_pos, d_neg, dhat_neg, omega, h_pos, h_neg,
+                                            offset, False)
+        y = r[i] if r[i] != y else y
+    return y
+
+
 @settings(max_examples=100, deadline=None)
 @given(knob=valid_knobs(), seed=st.integers(0, 2**32 - 1), y0=st.floats(-10, 10))
 def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
     rng = np.random.default_rng(seed)
     x = np.cumsum(rng.normal(0, 4, 200))
     args = knob._kernel_args()
-    for py, data, extra in ((model_mod._forward_py, x, (y0,)),
-                            (model_mod._inverse_py, x, (y0, knob.holding_knob_angle(y0)))):
+    for compiled_fn, plain_fn, data, extra in (
+            (kernel.forward, _plain_forward, x, (y0,)),
+            (kernel.inverse, _plain_inverse, x, (y0, knob.holding_knob_angle(y0)))):
         compiled, plain = np.empty_like(data), np.empty_like(data)
-        last_c = model_mod._kernel(py)(data, *args, *extra, compiled)
-        last_p = py(data, *args, *extra, plain)
+        last_c = compiled_fn(data, *args, *extra, compiled)
+        last_p = plain_fn(data, *args, *extra, plain)
         # same operations in the same order: bit for bit, not approximately
         assert np.array_equal(compiled, plain) and last_c == last_p
 
 
 def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_compensate():
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.estimate import Estimate
     from hystcli.io import Run
     from hystcli.model import KnobIdentification

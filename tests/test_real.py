@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 from hystcli.compensation import predict_tip
-from hystcli.diagnose import diagnose
-from hystcli.identify import identify
-from hystcli.importer import ImportOptions, convert, get_preset
+from hystcli.diagnosis import diagnose
+from hystcli.identification import identify
+from hystcli.io.importer import ImportOptions, convert, get_preset
 from hystcli.io import Run
 from hystcli.model import EffectSpec
 

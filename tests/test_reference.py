@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import reference as R
-from hystcli.zoo import plants
+from plants.zoo import plants
 
 BENCH = Path(__file__).resolve().parents[1] / "bench"
-FORBIDDEN = ("hystcli.identify", "hystcli.shift", "hystcli.current", "hystcli.signal")
+FORBIDDEN = ("hystcli.identification", "hystcli.shift", "hystcli.current", "hystcli.signal")
 
 
 def _imports(path: Path) -> set[str]:

@@ -1,4 +1,4 @@
-"""The loop re-identified from the sweep under a hypothesised lag (hystcli/refit.py)."""
+"""The loop re-identified from the sweep under a hypothesised lag (hystcli/diagnosis/refit.py)."""
 from __future__ import annotations
 
 import math
@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from hystcli import effects as E
-from hystcli import refit as R
-from hystcli.identify import identify
+from hystcli.diagnosis import refit as R
+from hystcli.identification import identify
 from hystcli.io import Run
 from hystcli.model import KnobModel, Model
 

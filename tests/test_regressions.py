@@ -3,7 +3,7 @@ happen, kept as rows of tests/data/regressions.csv and run by the one test below
 
 To add a record, append a row to tests/data/regressions.csv:
 
-* ``plants``: ``zoo`` (hystcli.zoo.plants) or ``wild`` (bench/plants/wild.py);
+* ``plants``: ``zoo`` (plants.zoo.plants) or ``wild`` (bench/plants/wild.py);
 * ``seed``: the case's seed (``sweep_case(seed)`` for identify, ``replay_case(seed)`` for shift);
 * ``family``: the family that seed draws (checked first: a plant module that changed its draws
   is named, not mistaken for a regression);
@@ -35,7 +35,7 @@ from pathlib import Path
 import pytest
 
 from hystcli.errors import HystError
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run, parse_run
 from hystcli.shift import ReplayProbe, detect_shift
 
@@ -57,7 +57,7 @@ def _rows() -> list:
 
 
 def _plants(name: str):  # noqa: ANN202 - a plant module
-    return importlib.import_module("hystcli.zoo.plants" if name == "zoo" else "plants.wild")
+    return importlib.import_module("plants.zoo.plants" if name == "zoo" else "plants.wild")
 
 
 def _run(record, source: str, tip: bool) -> Run:

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hystcli.experiment import SAMPLE_DATA, default_data_dir, sample_data_runs
+from hystcli.sim.scenarios import SAMPLE_DATA, default_data_dir, sample_data_runs
 from hystcli.io import format_run, read_run
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The diagnosis' search engine (hystcli/search.py): the stage-cached SSE table equals a prediction
+"""The diagnosis' search engine (hystcli/diagnosis/search.py): the stage-cached SSE table equals a prediction
 per grid point, the form choice needs its runs, fits recover parameters and keep a wall's side."""
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from hystcli import effects as E
-from hystcli import search as S
-from hystcli import twin
+from hystcli.diagnosis import search as S
+from hystcli.sim import twin
 from hystcli.model import Shape
 from test_diagnose import BASE, CAT, T, make_runs
 

@@ -14,7 +14,7 @@ import pytest
 
 from hystcli.errors import DataError, LinkError, ShiftDetectionError
 from hystcli.estimate import Estimate
-from hystcli.identify import identify
+from hystcli.identification import identify
 from hystcli.io import Run, read_run
 from hystcli.model import KnobIdentification, KnobModel, Model
 from hystcli.shift import (DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,

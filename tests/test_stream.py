@@ -15,7 +15,7 @@ from typer.testing import CliRunner
 import hystcli
 import hystcli.safety
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.cli import app
 from hystcli.compensation import compensate, predict_tip
 from hystcli.errors import DataError, ModelError

@@ -8,7 +8,7 @@ import pytest
 
 import hystcli
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import twin
 from hystcli.io import read_run
 from hystcli.model import Model
 

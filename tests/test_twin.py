@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from hystcli import effects as E
-from hystcli import twin
+from hystcli.sim import live as live_twin
+from hystcli.sim import twin
 from hystcli.errors import DataError, ModelError
 from hystcli.filters import lowpass
 from hystcli.io import Run
@@ -130,7 +131,7 @@ MOVES = [(1, 15.0, 20.0), (2, -12.0, 40.0), (1, -25.0, 30.0), (1, 5.0, 10.0), (2
 ])
 def test_live_twin_matches_a_batch_simulation_of_the_concatenated_motion(effects):
     shape = Shape.parse("alpha=60,theta=20")
-    live = twin.LiveTwin(CAT, shape=shape, effects=effects, noise=False, record=True)
+    live = live_twin.LiveTwin(CAT, shape=shape, effects=effects, noise=False, record=True)
     readings = [live.move(k, q, speed_deg_s=v) for k, q, v in MOVES]
     live.hold(1.5)
     rec = live.recorded()
@@ -152,7 +153,7 @@ def test_live_twin_matches_a_batch_simulation_of_the_concatenated_motion(effects
 
 
 def test_live_twin_current_reads_while_moving_and_flat_at_rest_in_the_dead_zone():
-    live = twin.LiveTwin(CAT, noise=False, knobs=(1,))
+    live = live_twin.LiveTwin(CAT, noise=False, knobs=(1,))
     _, c_moving, _ = live.move(1, 3.0, speed_deg_s=20.0)
     # in the dead zone: no tension, the Coulomb term of a moving motor
     assert c_moving == pytest.approx(120.0 + 6.0 * math.tanh(20.0 / 0.5), abs=0.05)
@@ -162,7 +163,7 @@ def test_live_twin_current_reads_while_moving_and_flat_at_rest_in_the_dead_zone(
 
 
 def test_live_twin_keeps_the_samples_of_its_last_move_or_hold():
-    live = twin.LiveTwin(CAT, noise=False, filter_hz=None, knobs=(1,))
+    live = live_twin.LiveTwin(CAT, noise=False, filter_hz=None, knobs=(1,))
     assert live.last_samples(1)[0].size == 0
     # 0 -> 1 deg at 5 deg/s sampled every 1 ms: 200 samples at q_i = i / 200 (i = 1..200); the
     # robot's first sample at rest (q = 0) is not part of the move
@@ -180,7 +181,7 @@ def test_live_twin_keeps_the_samples_of_its_last_move_or_hold():
 
 def test_live_twin_is_deterministic_under_a_seed_and_can_lack_a_tracker():
     def session(seed, **kw):
-        live = twin.LiveTwin(CAT, seed=seed, **kw)
+        live = live_twin.LiveTwin(CAT, seed=seed, **kw)
         return [live.move(1, q) for q in (10.0, 25.0, -5.0)]
 
     a, b, c = session(7), session(7), session(8)
@@ -191,7 +192,7 @@ def test_live_twin_is_deterministic_under_a_seed_and_can_lack_a_tracker():
 
 
 def test_live_twin_shape_change_shifts_the_dead_zone_under_the_knob():
-    live = twin.LiveTwin(CAT, noise=False, knobs=(1,))
+    live = live_twin.LiveTwin(CAT, noise=False, knobs=(1,))
     live.set_shape(Shape.parse("alpha=90,theta=0"))  # offset 13.5 deg (paper eq. 3)
     assert live.true_offsets[1] == pytest.approx(13.5)
     # the bend pulls the anterior-negative tendon taut under the knob at 0: u = -13.5 is on L8,

@@ -1,5 +1,5 @@
 """Diagnosis on catheters it was not built on (issue 11, item 4): a seeded handful of the withheld
-suite of the independent zoo (:mod:`hystcli.zoo.catheters`), each identified from its own sweep
+suite of the independent zoo (:mod:`plants.zoo.catheters`), each identified from its own sweep
 and diagnosed on its runs with held-out runs the diagnosis never saw (``bench/withheld.py`` runs
 the whole suite); and the Python API gives the command line's bytes on a zoo catheter.
 
@@ -17,7 +17,7 @@ from typer.testing import CliRunner
 
 import hystcli
 from hystcli.cli import app
-from hystcli.zoo import catheters as C
+from plants.zoo import catheters as C
 
 ROOT = Path(__file__).resolve().parent.parent
 _spec = importlib.util.spec_from_file_location("withheld_bench", ROOT / "bench" / "withheld.py")
@@ -83,7 +83,7 @@ def zoo_files(tmp_path_factory):
 def test_api_diagnose_and_predict_are_the_command_lines_bytes(zoo_files, tmp_path):
     from dataclasses import replace
 
-    from hystcli.diagnose import diagnose
+    from hystcli.diagnosis import diagnose
     from hystcli.io import dumps_model
 
     d, runs = zoo_files

@@ -10,8 +10,8 @@ import math
 import numpy as np
 import pytest
 
-from hystcli.zoo import catheters as cz
-from hystcli.zoo.plants import KnobTruth
+from plants.zoo import catheters as cz
+from plants.zoo.plants import KnobTruth
 
 RUN_COLS = ["t", "q1", "q2", "y1", "y2"]
 SWEEP_COLS = ["t", "q1", "q2", "y1", "y2", "c1", "c2"]

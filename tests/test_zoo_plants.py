@@ -1,4 +1,4 @@
-"""Tests of the independent plant zoo (hystcli.zoo.plants): physics, format, determinism."""
+"""Tests of the independent plant zoo (plants.zoo.plants): physics, format, determinism."""
 from __future__ import annotations
 
 import csv
@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from hystcli.zoo import plants as P
+from plants.zoo import plants as P
 
 PAPER = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)
 PARAM_SETS = [

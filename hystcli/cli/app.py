@@ -310,11 +310,11 @@ def only_formats(fmt: "OutputFormat", command_name: str, *allowed: "OutputFormat
 
 
 def columns_mapping(spec: Optional[str]) -> Any:
-    """The ``--columns`` mapping (:func:`hystcli.importer.columns_mapping`), or None; a malformed
+    """The ``--columns`` mapping (:func:`hystcli.io.importer.columns_mapping`), or None; a malformed
     spec is a usage error."""
     if spec is None:
         return None
-    from .. import importer
+    from ..io import importer
 
     with option_errors("--columns"):
         return importer.columns_mapping(spec)
@@ -329,7 +329,7 @@ def load_run(path: Path, columns: Any = None, require: tuple[str, ...] = ("t",),
     with reading(path, quiet) as progress:
         if columns is None:
             return io.read_run(path, require=require, progress=progress)
-        from .. import importer
+        from ..io import importer
 
         imported = importer.read_mapped(path, columns, require=require, progress=progress)
     if not quiet:
@@ -373,8 +373,8 @@ def _json_default(obj: Any) -> Any:
 
 
 def echo_table(table: Any, fmt: "OutputFormat | str", digits: int = 2) -> None:
-    """A :class:`hystcli.metrics.Table` on stdout in any ``--format``."""
-    from ..metrics import format_table
+    """A :class:`hystcli.report.table.Table` on stdout in any ``--format``."""
+    from ..report.table import format_table
 
     typer.echo(format_table(table, getattr(fmt, "value", fmt), digits), nl=False)
 
@@ -411,10 +411,10 @@ def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]
 
     Examples
     --------
-    >>> with progress(quiet) as update:          # doctest: +SKIP
+    >>> items = ["sweep.csv", "replay.csv"]
+    >>> with progress(quiet=True) as update:
     ...     for i, item in enumerate(items, 1):
-    ...         work(item)
-    ...         update(f"did {item}", i, len(items))
+    ...         update(f"read {item}", i, len(items))
     """
     if quiet:
         yield lambda message, done=None, total=None: None
@@ -439,7 +439,7 @@ def progress(quiet: bool = False, interval: float = 1.0) -> Iterator[ProgressFn]
 @contextlib.contextmanager
 def reading(path: Path, quiet: bool = False) -> Iterator[Optional[Callable[[int, int], None]]]:
     """The ``progress`` of a big file's reading (:func:`hystcli.io.read_run`,
-    :func:`hystcli.importer.convert`): a rich bar on stderr, in MiB, only when stderr is a
+    :func:`hystcli.io.importer.convert`): a rich bar on stderr, in MiB, only when stderr is a
     terminal (a log gets no lines of it); None otherwise."""
     if quiet or not stderr_is_tty():
         yield None

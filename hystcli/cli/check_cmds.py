@@ -81,9 +81,9 @@ def render_lines(reports, errors_only: bool = False) -> list[str]:  # noqa: ANN0
     return lines
 
 
-def problem_table(reports):  # noqa: ANN001, ANN202 - sequence of check.CheckReport -> metrics.Table
+def problem_table(reports):  # noqa: ANN001, ANN202 - sequence of check.CheckReport -> report.table.Table
     """Every problem as a row, for ``--format`` csv/markdown/latex."""
-    from ..metrics import Table
+    from ..report.table import Table
 
     rows = tuple((r.source, p.level, p.where, p.message) for r in reports for p in r.problems)
     return Table(("file", "level", "where", "message"), ("file", "level", "where", "message"), rows)

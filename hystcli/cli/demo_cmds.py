@@ -1,7 +1,7 @@
 """`hyst demo`: the paper's whole experiment on the virtual catheters, Tables I and II beside the paper's.
 
-Parses the options, calls :func:`hystcli.experiment.run_protocol`, prints what
-:func:`hystcli.experiment.render` returns and writes :func:`hystcli.experiment.write_outputs`.
+Parses the options, calls :func:`hystcli.sim.experiment.run_protocol`, prints what
+:func:`hystcli.sim.render.render` returns and writes :func:`hystcli.sim.render.write_outputs`.
 """
 from __future__ import annotations
 
@@ -52,7 +52,7 @@ def demo(
                                               "controllers (no diagnosis, no comp+shift+diag).")] = False,
     quiet: QuietOpt = False,
 ) -> None:
-    from .. import experiment
+    from ..sim import experiment, render, scenarios
 
     only_formats(fmt, "demo", OutputFormat.table, OutputFormat.json, OutputFormat.markdown)
     if simulate and data is not None:
@@ -62,9 +62,9 @@ def demo(
                         "or leave --data out to use sample_data/ here or the twin)")
     if out.exists() and not out.is_dir():
         raise DataError(f"{out}: exists and is not a directory (--out needs a folder)")
-    data_dir = None if simulate else (data if data is not None else experiment.default_data_dir())
+    data_dir = None if simulate else (data if data is not None else scenarios.default_data_dir())
     # without --simulate the recordings are the sample data's, wherever they come from
-    recording_seed = None if simulate else experiment.SAMPLE_DATA_SEED
+    recording_seed = None if simulate else scenarios.SAMPLE_DATA_SEED
     if data_dir is None and not simulate:
         info("no sample_data/ in this folder: recording the same data from the twin (seeded, "
              "as scripts/make_sample_data.py made it)", quiet)
@@ -73,8 +73,8 @@ def demo(
     with progress(quiet) as update:
         result = experiment.run_protocol(trials=trials, seed=seed, data_dir=data_dir, progress=update,
                                          diagnose=not no_diagnose, recording_seed=recording_seed)
-    text = experiment.render(result, fmt.value)
-    written = experiment.write_outputs(result, out, with_figures=not no_figures)
+    text = render.render(result, fmt.value)
+    written = render.write_outputs(result, out, with_figures=not no_figures)
     elapsed = time.perf_counter() - started
     if prints(fmt, quiet):
         typer.echo(text, nl=False)

@@ -1,13 +1,12 @@
 """Commands of the live robot link: ``sim-robot`` (the twin behind a pseudo-terminal), ``sweep``,
 ``play``, and the manual ones: ``status``, ``home``, ``jog``.
 
-Each parses, calls one core function of :mod:`hystcli.robot` (or the emulator), renders. Every
+Each parses, calls one core function of :mod:`hystcli.device.robot` (or the emulator), renders. Every
 command that moves a knob checks the whole request against the limits of
 :mod:`hystcli.cli.robot_opts` (tightened by what the robot announces) before the first MOVE.
 """
 from __future__ import annotations
 
-import math
 import signal
 import sys
 from pathlib import Path
@@ -16,7 +15,7 @@ from typing import Annotated, Any, List, Optional
 import typer
 
 from .. import io
-from ..calibration import CALIBRATED_NAMES, calibrated_catheter
+from ..sim.calibration import CALIBRATED_NAMES, calibrated_catheter
 from ..errors import DataError, HystError
 from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
@@ -66,11 +65,13 @@ def sim_robot_cmd(
     fault: Annotated[Optional[List[str]], typer.Option(
         "--fault", help="Inject a fault (tests): KIND@N[xCOUNT][=VALUE], KIND one of silent, garble, "
                         "close, error, spike, delay; N counts MOVE frames.")] = None,
-    zoo: Annotated[Optional[str], typer.Option(
-        "--zoo", metavar="SEED[:FAMILY[:OFFSET]]",
-        help="Serve an independent plant of hystcli.zoo.plants instead of the catheter (knob 1 only): "
-             "its seed, current-law family and the shift its shaft carries (deg). For tests of the "
-             "live path on a plant our code did not make.")] = None,
+    plant: Annotated[Optional[str], typer.Option(
+        "--plant", metavar="FILE.py[:ARGS]",
+        help="Serve a plant built by a Python file instead of the catheter (tests of the live path on "
+             "a plant our code did not make): FILE.py defines plant(args) returning the plant, ARGS "
+             "(the text after the first ':' following .py) passed as one string. The independent test "
+             "plants are not installed with hyst; the repository's bench/plants/live.py serves them: "
+             "--plant bench/plants/live.py:SEED[:FAMILY[:OFFSET]].")] = None,
     quiet: QuietOpt = False,
 ) -> None:
     """Serve the virtual catheter as a robot on a pseudo-terminal until Ctrl-C or SIGTERM.
@@ -82,8 +83,8 @@ def sim_robot_cmd(
     --catheter and --effect.
     """
     from ..effects import format_effects
-    from ..emulator import Fault, serve
-    from ..twin import LiveTwin
+    from ..device.emulator import Fault, serve
+    from ..sim.live import LiveTwin
 
     knob_list = parse_knobs(one_of(knob, knobs_alias, "--knob", "--knobs")) or (1, 2)
     if not name or len(name) > 32 or any(not (0x21 <= ord(ch) <= 0x7E) or ch in "*=" for ch in name):
@@ -106,8 +107,8 @@ def sim_robot_cmd(
         faults = [Fault.parse(f) for f in fault or ()]
     except HystError as exc:
         raise _usage("--fault", exc) from None
-    if zoo is not None:
-        twin = _zoo_plant(zoo)
+    if plant is not None:
+        twin = _file_plant(plant)
     else:
         twin = LiveTwin(cath, shape=shp, rotation=rotation, effects=effs, seed=seed, knobs=knob_list)
     server = serve(twin, latency=latency_ms / 1000.0, faults=faults, name=name,
@@ -122,7 +123,7 @@ def sim_robot_cmd(
         # a client may connect and start moving at once
         sys.stdout.write(server.path + "\n")
         sys.stdout.flush()
-        what = (f"zoo plant {zoo}" if zoo is not None else
+        what = (f"plant {plant}" if plant is not None else
                 f"{catheter} ({shp}, rotation {rotation:g} deg, effects {format_effects(twin.effects)})")
         info(f"serving {what} on {server.path}; Ctrl-C to stop", quiet)
         server.serve_forever()
@@ -135,23 +136,25 @@ def sim_robot_cmd(
         server.shutdown()
 
 
-def _zoo_plant(text: str) -> Any:
-    """The independent plant ``SEED[:FAMILY[:OFFSET]]`` of :mod:`hystcli.zoo.plants`, bent."""
-    from ..zoo import plants
+def _file_plant(text: str) -> Any:
+    """The plant ``plant(ARGS)`` of the Python file in ``FILE.py[:ARGS]`` builds."""
+    import importlib.util
 
-    parts = text.split(":")
+    path, sep, args = text.partition(".py:")
+    path = path + ".py" if sep else text
+    spec = importlib.util.spec_from_file_location("hyst_sim_plant", path) if Path(path).is_file() else None
+    if spec is None or not path.endswith(".py"):
+        raise typer.BadParameter(f"{path!r} is not a Python file (FILE.py[:ARGS])", param_hint="--plant")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    build = getattr(module, "plant", None)
+    if not callable(build):
+        raise typer.BadParameter(f"{path} defines no function plant(args)", param_hint="--plant")
     try:
-        seed = int(parts[0])
-        family = parts[1] if len(parts) > 1 and parts[1] else None
-        offset = float(parts[2]) if len(parts) > 2 else 0.0
-        if len(parts) > 3 or seed < 0 or not math.isfinite(offset) or (
-                family is not None and family not in plants.FAMILIES):
-            raise ValueError
-    except ValueError:
-        raise typer.BadParameter(f"{text!r}: expected SEED[:FAMILY[:OFFSET]], FAMILY one of "
-                                 f"{', '.join(plants.FAMILIES)}", param_hint="--zoo") from None
-    plant, _ = plants.live_plant(seed, family, offset=offset)
-    return plant
+        return build(args)
+    except ValueError as exc:
+        # the file's own refusal of its arguments is a usage error, as any option value's
+        raise typer.BadParameter(f"{args!r}: {exc}", param_hint="--plant") from None
 
 
 @command("sweep", "Write the identification sweep as commands for `play`",
@@ -174,7 +177,7 @@ def sweep_cmd(
     a straight shaft: play it on the robot with `hyst play` and identify the model from the
     recording with `hyst identify`.
     """
-    from ..twin import sweep
+    from ..sim.twin import sweep
 
     t, q = sweep(amplitude=amplitude, cycles=cycles, peak_speed=peak_speed, fs=fs)
     run = io.Run({"t": t, f"q{knob}": q}, {"motion": "sweep", "controller": "none", "knob": str(knob),
@@ -220,7 +223,7 @@ def play_cmd(
     the knobs go back to where they began (--no-return: they hold), the error says where each
     knob is, nothing is written, and the exit code is non-zero.
     """
-    from ..robot import Interrupted, check_trajectory, play_trajectory
+    from ..device.robot import Interrupted, check_trajectory, play_trajectory
     from ..safety import LimitExceeded
 
     mode = speed_mode(allow_fast, strict_speed)
@@ -292,7 +295,7 @@ def status_cmd(
 
     Reads only (HELLO and one STATE per knob): nothing moves, no STOP is sent.
     """
-    from ..robot import status
+    from ..device.robot import status
 
     device = _open(port, baud, timeout)
     try:
@@ -303,7 +306,7 @@ def status_cmd(
         echo_json(st.to_dict())
         return
     if fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("knob", "angle", "current", "tip"), ("knob", "angle (deg)", "current (mA)", "tip (deg)"),
                          tuple((s.knob, s.angle, s.current, s.tip) for s in st.knobs)), fmt, digits=3)
@@ -329,7 +332,7 @@ def _render_moves(moves: dict, fmt: OutputFormat, quiet: bool) -> None:
         echo_json({"knobs": {str(k): {"from": b.angle, "to": a.angle, "current": a.current, "tip": a.tip}
                              for k, (b, a) in moves.items()}})
     elif fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("knob", "from", "to", "current", "tip"),
                          ("knob", "from (deg)", "to (deg)", "current (mA)", "tip (deg)"),
@@ -363,7 +366,7 @@ def home_cmd(
     Every target is checked against the travel limit first. On a fault or Ctrl-C the motors
     stop and the error says where each knob is.
     """
-    from ..robot import Interrupted, home
+    from ..device.robot import Interrupted, home
 
     knobs = parse_knobs(knob, most=MAX_KNOB)
     _check_speed(speed, max_speed, travel_limit, abs(angle))
@@ -405,7 +408,7 @@ def jog_cmd(
     Refused before anything moves when |--by| exceeds --max-step, the target the travel limit,
     or --speed the speed limit.
     """
-    from ..robot import Interrupted, jog
+    from ..device.robot import Interrupted, jog
 
     if abs(by) > max_step:
         raise typer.BadParameter(f"|{by:g}| deg is beyond --max-step {max_step:g} deg", param_hint="--by")

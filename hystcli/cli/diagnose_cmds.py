@@ -50,7 +50,7 @@ def diagnose_cmd(
     """
     from .. import io
     from ..check import require_shape
-    from ..diagnose import diagnose, diagnosis_figure
+    from ..diagnosis import diagnose, diagnosis_figure
     from ..effects import EFFECTS
 
     only_formats(fmt, "diagnose", OutputFormat.table, OutputFormat.json)

@@ -1,8 +1,8 @@
 """`hyst import`: foreign logs (any delimited text, gzip or not) to run CSVs.
 
-Parses the options into an :class:`~hystcli.importer.ImportMapping` and
-:class:`~hystcli.importer.ImportOptions`, converts every file with
-:func:`hystcli.importer.convert` before writing any, then writes the runs atomically and renders
+Parses the options into an :class:`~hystcli.io.importer.ImportMapping` and
+:class:`~hystcli.io.importer.ImportOptions`, converts every file with
+:func:`hystcli.io.importer.convert` before writing any, then writes the runs atomically and renders
 what was done (rows, rate, ranges, gain, zeroing, drift, warnings).
 """
 from __future__ import annotations
@@ -17,7 +17,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .. import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
+from ..io import importer  # numpy only (its filter imports scipy when it runs): the presets name the options
 from ..errors import DataError
 from ..io import all_or_none, check_not_input
 from .app import (FormatOpt, OutputFormat, QuietOpt, command, echo_json, info, only_formats, option_errors, reading,

@@ -11,6 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from .. import metrics  # numpy only: the grouping fields and plot formats name the options
+from ..report.figures import PLOT_FORMATS
 from .app import (ColumnsOpt, FormatOpt, OutputFormat, PlotOpt, QuietOpt, columns_mapping, command, distinct_inputs,
                   distinct_outputs, info, load_run, option_errors, prints, usage_error, warn)
 
@@ -55,7 +56,7 @@ def evaluate(
 
     if plot is not None:
         suffix = plot.suffix.lower().lstrip(".")
-        if suffix not in metrics.PLOT_FORMATS:
+        if suffix not in PLOT_FORMATS:
             usage_error(f"{plot} must end in .png, .pdf or .svg", "--plot")
     distinct_outputs(**{"--output": output, "--plot": plot})
     for target in (output, plot):
@@ -67,7 +68,9 @@ def evaluate(
     loaded = [require_shape(load_run(p, mapping, quiet=quiet)) for p in runs]
     evaluation = metrics.evaluate_runs(loaded, group_by=metrics.parse_group_by(group_by))
     text = metrics.render(evaluation, fmt.value, per_run=per_run)
-    png = metrics.evaluation_figure(loaded, plot.suffix.lower().lstrip(".")) if plot is not None else None
+    from ..report.evaluation import evaluation_figure
+
+    png = evaluation_figure(loaded, plot.suffix.lower().lstrip(".")) if plot is not None else None
 
     if not quiet:
         for w in evaluation.warnings:

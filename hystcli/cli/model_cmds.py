@@ -76,7 +76,7 @@ def identify_cmd(
         run = load_run(sweep, mapping, quiet=quiet)
         # the fit's libraries (scipy, numba) load only once the file is known to be good: a bad
         # file's error line comes in the time the command line itself takes to start
-        from ..identify import identify, plot_identification
+        from ..identification import identify, plot_identification
 
         result = identify(run, omega=omega, use_tip=not current_only, settings=settings)
     for fit in result.fits.values():
@@ -122,8 +122,8 @@ def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Ident
     return None if r is None else {"period": r.period, "sin": r.sin, "cos": r.cos, "amplitude": r.amplitude}
 
 
-def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -> metrics.Table
-    from ..metrics import Table
+def _identify_table(result):  # noqa: ANN001, ANN202 - identify.Identification -> report.table.Table
+    from ..report.table import Table
 
     rows = []
     for k, fit in result.fits.items():
@@ -211,9 +211,9 @@ def compensate_cmd(
                       "; within them after rate-limiting)" if result.catch_ups else "; within them)"))
 
 
-def _motion_table(check, offsets):  # noqa: ANN001, ANN202 - safety.MotionCheck, {knob: offset} -> metrics.Table
+def _motion_table(check, offsets):  # noqa: ANN001, ANN202 - safety.MotionCheck, {knob: offset} -> report.table.Table
     """compensate's report for ``--format`` csv/markdown/latex."""
-    from ..metrics import Table
+    from ..report.table import Table
 
     rows = tuple((k, offsets[k], m.q_min, m.q_max, m.peak_speed, m.peak_speed_t, m.peak_accel, m.peak_accel_t)
                  for k, m in check.knobs.items())
@@ -253,10 +253,11 @@ def predict_cmd(
     info(f"wrote {output}", quiet)
 
 
-def _prediction_table(predicted):  # noqa: ANN001, ANN202 - io.Run -> metrics.Table
+def _prediction_table(predicted):  # noqa: ANN001, ANN202 - io.Run -> report.table.Table
     import numpy as np
 
-    from ..metrics import Table, ptpe, rmse
+    from ..metrics import ptpe, rmse
+    from ..report.table import Table
 
     rows = []
     for k in predicted.knobs("y"):
@@ -287,7 +288,7 @@ def rotate_shift_cmd(
     this case out).
     """
     from .. import io
-    from ..metrics import Table
+    from ..report.table import Table
 
     model_path = one_of(model_arg, model_opt, "MODEL.json", "--model")
     if model_path is None:

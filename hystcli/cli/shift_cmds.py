@@ -75,7 +75,7 @@ def _text(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
     """The offsets found as aligned text, each knob's notes below the table."""
     import textwrap
 
-    from ..metrics import TEXT_WIDTH
+    from ..report.table import TEXT_WIDTH
 
     head = (f"{'knob':>4}  {'offset':>8}  {'interval':>17}  {'d~_neg':>8}  {'d~_pos':>8}  {'edge':>11}  "
             f"{'travel':>7}  {'steps':>5}")
@@ -92,8 +92,8 @@ def _text(results: dict[int, shift_mod.ShiftResult], output: Path) -> str:
 
 
 def _table(results: dict[int, shift_mod.ShiftResult], output: Path) -> Any:
-    """The offsets found as a :class:`hystcli.metrics.Table` (``--format`` csv/markdown/latex)."""
-    from ..metrics import Table
+    """The offsets found as a :class:`hystcli.report.table.Table` (``--format`` csv/markdown/latex)."""
+    from ..report.table import Table
 
     rows = tuple((k, r.offset, r.offset_lo, r.offset_hi, r.d_neg, r.d_pos, r.edge, r.edge_found_at, r.travel,
                   r.steps, "; ".join(_notes(r))) for k, r in results.items())

@@ -1,7 +1,7 @@
 """`hyst track`: compensate a reference live and play it on the robot, logging a run CSV.
 
 Parses, reads the reference (a file, or ``-``: stdin line by line), opens the robot, calls
-:func:`hystcli.tracking.track`, writes the log atomically and renders a summary. Nothing heavy is
+:func:`hystcli.device.tracking.track`, writes the log atomically and renders a summary. Nothing heavy is
 imported at the top (``hyst --help`` must stay light).
 """
 from __future__ import annotations
@@ -74,9 +74,9 @@ def track_cmd(
     """
     from .. import io
     from ..device import Device
-    from ..robot import Interrupted
+    from ..device.robot import Interrupted
     from ..safety import LimitExceeded
-    from ..tracking import reference_from_lines, reference_from_run, track
+    from ..device.tracking import reference_from_lines, reference_from_run, track
 
     mode = speed_mode(allow_fast, strict_speed)
     inputs = [model_path] + ([] if reference == "-" else [Path(reference)])

@@ -7,7 +7,7 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from ..calibration import CALIBRATED_NAMES
+from ..sim.calibration import CALIBRATED_NAMES
 from ..names import MOTIONS
 from .app import (ColumnsOpt, EffectOpt, FormatOpt, KnobsAliasOpt, OutOpt, OutputFormat, QuietOpt, SeedOpt, about,
                   columns_mapping, command, echo_json, echo_table, effects_option, info, load_run, one_of,
@@ -53,9 +53,9 @@ def simulate_cmd(
     deadzone, creep, latency, saturation, contact (docs/design.md section 8).
     """
     from .. import io
-    from ..calibration import calibrated_catheter
+    from ..sim.calibration import calibrated_catheter
     from ..model import Shape
-    from ..twin import simulate_motion
+    from ..sim.twin import simulate_motion
 
     # every option is checked before the commands file is read or the twin runs
     commands = one_of(commands_arg, commands_opt, "COMMANDS.csv", "--commands")
@@ -89,7 +89,7 @@ def simulate_cmd(
     if fmt == OutputFormat.json:
         echo_json(summary)
     elif fmt != OutputFormat.table:
-        from ..metrics import Table
+        from ..report.table import Table
 
         echo_table(Table(("key", "value"), ("key", "value"), tuple((k, str(v)) for k, v in summary.items())), fmt)
     info(f"wrote {output}: {len(run)} samples, knobs {','.join(map(str, run.knobs('q')))}, "

@@ -181,7 +181,7 @@ class EffectType:
     driver: str = ""
     """What drives the effect: ``shape``, ``condition``, ``other knob``, ``speed``, ``time``, ``tip``."""
     regressors: tuple[str, ...] = ()
-    """The physical regressors (:data:`hystcli.diagnose.REGRESSORS`) its residual follows."""
+    """The physical regressors (:data:`hystcli.diagnosis.attribution.REGRESSORS`) its residual follows."""
     forms: tuple[Form, ...] = ()
 
     # -- the default form, for code that knows one form per effect ------------------------------
@@ -273,7 +273,7 @@ class EffectType:
         """Where the form puts a delay between the knob command and the tip, and how long it is:
         ``(share, trail)``, the share of it in the drive (1: before the tendons, which the motor
         current then shows too; 0: after them, the tip or the tracker) and the trail in seconds
-        at constant speed. ``(None, 0.0)``: the form makes no such claim (:mod:`hystcli.drive`)."""
+        at constant speed. ``(None, 0.0)``: the form makes no such claim (:mod:`hystcli.diagnosis.drive`)."""
         return None, 0.0
 
     def at_rest(self, eff: "Effect", y: float, sig: Signals) -> float:
@@ -284,7 +284,7 @@ class EffectType:
     def knob_key(self, eff: "Effect", k: int) -> Any:
         """A hashable key of what this stage does on knob ``k`` alone: two effects of this type
         with equal keys predict knob ``k`` of any run alike, given the same other effects (the
-        diagnosis' search computes such a knob once, :func:`hystcli.search.table`); None (the
+        diagnosis' search computes such a knob once, :func:`hystcli.diagnosis.search.table`); None (the
         default): no such promise."""
         return None
 
@@ -293,7 +293,7 @@ class EffectType:
         identity, its :meth:`at_rest` too; None where there is none (the default). A run whose
         input to the stage stays inside it is predicted exactly as without the effect, so the
         diagnosis' search takes the base SSE there without running the chain
-        (:func:`hystcli.search.table`)."""
+        (:func:`hystcli.diagnosis.search.table`)."""
         return None
 
     def new_state(self, eff: "Effect") -> Any:

@@ -13,6 +13,8 @@ import math
 import numpy as np
 from numba import njit
 
+from ..core import kernel
+
 LAG_STATE = 3
 """Size of a first-order lag's state ``[z, t, u]``: output, time and input of the last sample."""
 
@@ -174,12 +176,8 @@ def forward_edges_kernel(x, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
         if apart:
             far_pos = far_pos - ep[i]
             far_neg = far_neg - en[i]
-        lo = h_pos + omega * (min(far_pos, 0.0) + max(u - d_pos - b, 0.0))
-        hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(far_neg, 0.0))
-        if y < lo:
-            y = lo
-        if y > hi:
-            y = hi
+        lo, hi = kernel.envelopes(far_pos, u - d_pos - b, u - d_neg - a, far_neg, omega, h_pos, h_neg)
+        y = kernel.clamp(y, lo, hi)
         out[i] = y
     return y
 
@@ -236,23 +234,8 @@ def inverse_edges_kernel(r, offset, d_pos, d_neg, dhat_pos, dhat_neg, omega, h_p
             far_neg = far_neg - g
         xp = x
         yp = y
-        if ri > y:
-            near = d_pos + b
-            if far_pos > near and h_pos + omega * (near - far_pos) < ri <= h_pos + omega * (far_pos - near):
-                x = 0.5 * (far_pos + near + (ri - h_pos) / omega) + offset
-            elif ri > h_pos:
-                x = near + (ri - h_pos) / omega + offset
-            else:
-                x = far_pos + (ri - h_pos) / omega + offset
-            y = ri
-        elif ri < y:
-            near = d_neg + a
-            if far_neg < near and h_neg + omega * (far_neg - near) <= ri < h_neg + omega * (near - far_neg):
-                x = 0.5 * (far_neg + near + (ri - h_neg) / omega) + offset
-            elif ri < h_neg:
-                x = near + (ri - h_neg) / omega + offset
-            else:
-                x = far_neg + (ri - h_neg) / omega + offset
+        x = kernel.inverse_step(ri, y, x, d_pos + b, far_pos, d_neg + a, far_neg, omega, h_pos, h_neg, offset, True)
+        if ri > y or ri < y:
             y = ri
         if widen != 0.0:
             if x > xp + lead or x < xp - lead:
@@ -277,13 +260,8 @@ def inverse_speed_tau(widen):
 @njit(cache=True, fastmath=False)
 def _forward_one(u, y, d_pos, d_neg, far_pos, far_neg, b, a, omega, h_pos, h_neg):
     # one sample of forward_edges_kernel with the far edges already moved
-    lo = h_pos + omega * (min(u - far_pos, 0.0) + max(u - d_pos - b, 0.0))
-    hi = h_neg + omega * (min(u - d_neg - a, 0.0) + max(u - far_neg, 0.0))
-    if y < lo:
-        y = lo
-    if y > hi:
-        y = hi
-    return y
+    lo, hi = kernel.envelopes(u - far_pos, u - d_pos - b, u - d_neg - a, u - far_neg, omega, h_pos, h_neg)
+    return kernel.clamp(y, lo, hi)
 
 
 @njit(cache=True, fastmath=False)

@@ -63,7 +63,7 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "
     from matplotlib.figure import Figure
 
     from ..io import atomic_write
-    from ..metrics import figure_bytes
+    from ..report.figures import figure_bytes
 
     results = list(results)
     if not results:

@@ -39,11 +39,13 @@ import numpy as np
 
 from ..errors import HystError, ShiftDetectionError
 from ..estimate import Estimate
+from ..io import Run
 from ..model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
-from ..signal.reading import _classify, orientation
-from .probe import ProbeSample, ReplayExhausted, return_knob
+from ..signal.reading import _classify
+from ..signal.result import orientation
+from .probe import ProbeSample, ReplayExhausted, ReplayProbe, return_knob
 from .result import Evidence, ShiftResult
 
 __all__ = ["Reference", "reference_of", "detect_shift", "default_max_travel", "DEFAULT_MAX_TRAVEL"]
@@ -456,8 +458,9 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     ----------
     model : Model
         The straight-shaft model, with the identification sweep's reading of the current.
-    probe : Probe
-        Steps the knob and reads the current (:class:`.probe.ReplayProbe`, a live device probe).
+    probe : Probe or Run
+        Steps the knob and reads the current (:class:`.probe.ReplayProbe`, a live device probe);
+        a recorded replay (:class:`hystcli.io.Run`) is read through a :class:`.probe.ReplayProbe`.
     knob : int
     settings : Settings
         The level, the false-alarm rate, the widest offset interval returned.
@@ -484,6 +487,8 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         the knob first; its message says so.
     """
     k = int(knob)
+    if isinstance(probe, Run):
+        probe = ReplayProbe(probe, k)
     ref = reference_of(model, k, settings, eps_upper=eps_upper)
     direction, max_travel, max_steps = _limits(model, k, probe, ref, step, max_travel, max_steps, direction)
     search = _Search(probe, ref, settings, float(step), max_steps, max_travel, direction, progress)

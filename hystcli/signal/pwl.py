@@ -66,15 +66,6 @@ def autocorrelation_time(resid: np.ndarray, max_lag: int = 5000) -> float:
     return float(max(1.0, 1.0 + 2.0 * np.sum(acf[1:stop])))
 
 
-def _rho(z2: np.ndarray) -> np.ndarray:
-    """soft_l1: ``2 (sqrt(1 + z^2) - 1)``, z the standardised residual."""
-    return 2.0 * (np.sqrt(1.0 + z2) - 1.0)
-
-
-def _irls_weight(r: np.ndarray, scale: float) -> np.ndarray:
-    return 1.0 / np.sqrt(1.0 + (r / scale) ** 2)
-
-
 @dataclass(frozen=True)
 class Piecewise:
     """A continuous piecewise-linear fit of ``y`` against ``x`` (plus nuisance columns).

@@ -1,0 +1,133 @@
+"""The evaluation's figure: time and input against output per controller, like the paper's Figs. 6
+and 7 (``hyst evaluate --plot``, the demo's figures)."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import numpy as np
+
+from .. import metrics as M
+from ..errors import DataError
+from ..io import Run
+from .figures import PLOT_FORMATS, figure_bytes
+
+#: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
+CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}
+_EXTRA_COLOURS = ("tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
+GROUND_TRUTH_COLOUR = "black"
+
+
+def _controller_colour(name: str, extra: dict[str, str]) -> str:
+    if name in CONTROLLER_COLOURS:
+        return CONTROLLER_COLOURS[name]
+    if name not in extra:
+        extra[name] = _EXTRA_COLOURS[len(extra) % len(_EXTRA_COLOURS)]
+    return extra[name]
+
+
+PLOT_POINTS = 4000
+"""Samples per drawn line at most: a 420-pixel panel shows no more, and Agg renders 10 000-sample
+lines several times slower."""
+
+
+def _thin(*series: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Every k-th sample of each series (the last one kept), so a line has at most PLOT_POINTS."""
+    n = len(series[0])
+    if n <= PLOT_POINTS:
+        return series
+    idx = np.unique(np.r_[np.arange(0, n, int(np.ceil(n / PLOT_POINTS))), n - 1])
+    return tuple(np.asarray(s)[idx] for s in series)
+
+
+def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
+    """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as file bytes.
+
+    One column per (motion, shape, knob) present; in it, for each controller, one run (the first
+    catheter and trial, as the paper shows "one catheter"); top: ``r`` (ground truth, black) and
+    each controller's ``y`` against time; bottom: ``y`` against the input ``r``, with the ideal
+    ``y = r`` in black. Colours are the paper's: none blue, comp red, comp+shift green.
+
+    Parameters
+    ----------
+    runs : sequence of Run
+        As for :func:`hystcli.metrics.evaluate_runs`.
+    fmt : str
+        ``png``, ``pdf`` or ``svg``.
+
+    Returns
+    -------
+    bytes
+    """
+    if fmt not in PLOT_FORMATS:
+        raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    entries = []
+    for i, run in enumerate(runs):
+        source = run.source or f"<run {i + 1}>"
+        meta = {n: (M._meta_value(run, n) or M.UNKNOWN) for n in M._META_FIELDS}
+        for k in M._evaluable_knobs(run, source, []):
+            entries.append((meta, k, run))
+    entries.sort(key=lambda e: (M._rank("catheter", e[0]["catheter"]), M._rank("trial", e[0]["trial"])))
+    columns: dict[tuple[str, str, int], dict[str, Run]] = {}
+    for meta, k, run in entries:
+        col = columns.setdefault((meta["motion"], meta["shape"], k), {})
+        col.setdefault(meta["controller"], run)
+    order = sorted(columns, key=lambda c: (M._rank("motion", c[0]), M._rank("shape", c[1]), c[2]))
+    if not order:
+        raise DataError("nothing to draw: no run with a tip column y1 or y2 and its reference")
+    motions = {c[0] for c in order}
+
+    fig = Figure(figsize=(4.2 * len(order), 7.0), dpi=100)
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(2, len(order), squeeze=False)
+    extra: dict[str, str] = {}
+    for j, ckey in enumerate(order):
+        motion, shape, k = ckey
+        by_ctrl = columns[ckey]
+        ctrls = sorted(by_ctrl, key=lambda c: M._rank("controller", c))
+        top, bottom = axes[0][j], axes[1][j]
+        ref = by_ctrl[ctrls[0]]
+        # ground truth drawn last and dashed, so a controller that tracks it perfectly hides nothing
+        top.plot(*_thin(ref.t, ref[f"r{k}"]), color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
+                 label="ground truth (r)")
+        lo = min(float(np.min(by_ctrl[c][f"r{k}"])) for c in ctrls)
+        hi = max(float(np.max(by_ctrl[c][f"r{k}"])) for c in ctrls)
+        bottom.plot([lo, hi], [lo, hi], color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
+                    label="ground truth (y = r)")
+        for c in ctrls:
+            run = by_ctrl[c]
+            colour = _controller_colour(c, extra)
+            label = M.CONTROLLER_LABELS.get(c, c)
+            top.plot(*_thin(run.t, run[f"y{k}"]), color=colour, lw=1.4, label=label)
+            bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), color=colour, lw=1.4, label=label)
+        title = f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else "")
+        top.set_title(title, fontsize=9)
+        top.set_xlabel("time (s)")
+        top.set_ylabel(f"output angle y{k} (deg)")
+        bottom.set_xlabel(f"input angle r{k} (deg)")
+        bottom.set_ylabel(f"output angle y{k} (deg)")
+        for ax in (top, bottom):
+            ax.grid(True, lw=0.3)
+    # one legend for the whole figure: the first column (often the straight shaft) lacks the
+    # controllers that only the bent shapes run (Compensation+Shift, the diagnosed one)
+    legend: dict[str, object] = {}
+    for ax in axes[0]:
+        for handle, label in zip(*ax.get_legend_handles_labels()):
+            legend.setdefault(label, handle)
+    width, height = fig.get_size_inches()
+    ncol = min(len(legend), 5, max(2, int(width // 2.4)))   # a label is about 2.4 in wide
+    rows = -(-len(legend) // ncol)
+    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=ncol,
+               fontsize=8, frameon=False)
+    # fixed margins in inches rather than tight_layout, which draws the whole figure once more
+    # just to measure its labels (a second of the demo)
+    fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.15 / width, bottom=(0.75 + 0.2 * rows) / height,
+                        top=1.0 - 0.3 / height, wspace=0.85 / 4.2 / 0.8, hspace=0.65 / 3.0)
+    return figure_bytes(fig, fmt)
+
+
+
+
+__all__ = ["CONTROLLER_COLOURS", "evaluation_figure"]
