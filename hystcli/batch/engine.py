@@ -236,7 +236,7 @@ class DaskEngine:
             window = self._window or max(4, 2 * workers + 2)
             todo = iter(jobs)
             flight: dict[str, tuple[Job, Any, int, Any]] = {}  # key -> (job, argument, attempts, future)
-            ac = as_completed()
+            ac = as_completed(loop=client.loop)
             exhausted = False
             seq = 0
 
