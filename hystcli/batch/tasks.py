@@ -208,11 +208,14 @@ def _identify(run: Any, payload: Payload, s: dict, warnings: list[str]) -> dict:
                       settings=Settings(level=s["level"], current_sign=s["current_sign"]))
     row: dict[str, Any] = {}
     for k, fit in result.fits.items():
-        warnings.extend(f"knob {k}: {w}" if not str(w).startswith("knob") else str(w) for w in fit.warnings)
+        warnings.extend(str(w) for w in fit.warnings)  # each names its file and knob already
         row[f"k{k}_method"] = str(fit.method)
         row[f"k{k}_rmse"] = _num(fit.rmse)
+        # the values the model file holds (what `hyst identify -o` writes); the intervals are the
+        # profile likelihood's, around its own optimum, which may differ from them in the 4th digit
+        for pname, value in fit.model.params().items():
+            row[f"k{k}_{pname}"] = _num(value)
         for pname, e in fit.estimates.items():
-            row[f"k{k}_{pname}"] = _num(e.value)
             row[f"k{k}_{pname}_lo"] = _num(e.lo)
             row[f"k{k}_{pname}_hi"] = _num(e.hi)
             row[f"k{k}_{pname}_fixed"] = bool(e.fixed)
