@@ -10,7 +10,7 @@ Needs the ``batch`` extra (``pip install 'hystcli[batch]'``: pyarrow, dask.distr
 """
 from __future__ import annotations
 
-from ..errors import HystError
+from .. import HystError
 
 EXTRA = "batch"
 

@@ -18,7 +18,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
-from ..errors import DataError
+from .. import DataError
 from . import table as T
 from .engine import Job, make_engine
 from .tasks import COMMANDS, NEEDS_MODEL, Payload, canonical_settings, execute

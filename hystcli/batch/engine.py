@@ -23,7 +23,7 @@ import os
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
-from ..errors import HystError
+from .. import HystError
 
 
 class EngineError(HystError):

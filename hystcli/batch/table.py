@@ -20,7 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import Any, Iterable, Mapping, Sequence
 
-from ..errors import DataError
+from .. import DataError
 
 IDENTITY = ("path", "sha256", "command", "status", "reason", "warnings", "model", "model_sha256", "key")
 """The first columns of every table, in this order; then ``manifest_*``, ``meta_*``, the result."""

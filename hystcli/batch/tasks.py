@@ -19,7 +19,7 @@ import os
 import socket
 import time
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 COMMANDS = ("identify", "evaluate", "detect-shift", "diagnose")
 """The commands ``hyst batch`` runs; diagnose runs on sessions of runs, the others on one run each."""
@@ -295,6 +295,23 @@ def _diagnose(payload: Payload, s: dict, runs: dict[str, Any], out: dict[str, di
             k = f["knob"]
             out[sha].update({f"k{k}_rmse_before": f["rmse_before"], f"k{k}_rmse_after": f["rmse_after"],
                              f"k{k}_ptpe_before": f["ptpe_before"], f"k{k}_ptpe_after": f["ptpe_after"]})
+
+
+def text_table(columns: Sequence[str], headers: Sequence[str], rows: Sequence[tuple], notes: Sequence[str] = ()) -> Any:
+    """A :class:`hystcli.metrics.Table` (what ``--format`` table/markdown/csv renders), for ``hyst report``."""
+    from ..metrics import Table
+
+    return Table(tuple(columns), tuple(headers), tuple(rows), tuple(notes))
+
+
+def write_figure(fig: Any, path: Any, inputs: Sequence[Any] = ()) -> None:
+    """Save a matplotlib Figure atomically (hyst's own writer: never over an input, never half a file)."""
+    from pathlib import Path
+
+    from ..io import atomic_write
+
+    fmt = Path(path).suffix.lower().lstrip(".") or "png"
+    atomic_write(path, lambda f: fig.savefig(f, format=fmt, dpi=120), inputs=inputs)
 
 
 _SINGLE: dict[str, Callable[..., dict]] = {"identify": _identify, "evaluate": _evaluate,

@@ -172,3 +172,74 @@ def batch_diagnose(
     _run("diagnose", runs, manifest, output, {"holdout": holdout, "candidates": candidates,
                                               "max_effects": max_effects, "bootstrap": bootstrap, "seed": seed},
          model, scheduler, jobs, retries, strict, fmt, quiet)
+
+
+def _tables(rep: Any, z_limit: float) -> list[Any]:
+    """The report's three views as tables (summary, drift, outliers)."""
+    from ..batch.tasks import text_table
+
+    stats = [f"{v}_{s}" for v in rep.values for s in ("mean", "std", "median")]
+    out = [text_table(["group", "runs", "failed", *stats], [rep.by or "group", "runs", "failed", *stats],
+                      [tuple(r.get(c) for c in ["group", "runs", "failed", *stats]) for r in rep.summary],
+                      [f"{rep.command}: {rep.runs} run(s), {rep.ok} ok; mean, sample std (ddof=1) and median over "
+                       "the runs with status ok"])]
+    if rep.time is not None:
+        cols = ["group", "value", "n", "first", "last", "slope", "unit"]
+        out.append(text_table(cols, cols, [tuple(d[c] for c in cols) for d in rep.drift],
+                              [f"drift against {rep.time}: first and last value in time order, least-squares slope"]))
+    cols = ["path", "group", "value", "x", "median", "mad", "z"]
+    out.append(text_table(cols, cols, [tuple(o[c] for c in cols) for o in rep.outliers],
+                          [f"outliers: |modified z| = |0.6745 (x - median) / MAD| > {z_limit:g} within each group "
+                           "(Iglewicz and Hoaglin)"
+                           + ("" if rep.outliers else "; none"), *rep.notes]))
+    return out
+
+
+@command("report", "Summaries, drift and outliers of a batch's table",
+         epilog="Example: hyst report scores.parquet --by meta_catheter --time manifest_day -o drift.png")
+def report_cmd(
+    table: Annotated[Path, typer.Argument(metavar="TABLE", help="A results table of hyst batch (.parquet or .csv).",
+                                          show_default=False)],
+    by: Annotated[Optional[str], typer.Option("--by", help="Group by this column (e.g. meta_catheter, "
+                                                           "manifest_robot).")] = None,
+    time: Annotated[Optional[str], typer.Option("--time", help="Drift against this column (dates, time stamps "
+                                                               "or numbers).")] = None,
+    value: Annotated[Optional[List[str]], typer.Option(
+        "--value", help="Value column (repeatable; default: the command's RMSE/PTPE, parameters or offsets).")] = None,
+    z: Annotated[float, typer.Option("--z", help="Outlier threshold on the modified z-score.")] = 3.5,
+    output: Annotated[Optional[Path], typer.Option(
+        "--output", "-o", help="Draw the drift (needs --time) to this PNG/PDF/SVG file.")] = None,
+    fmt: FormatOpt = OutputFormat.table,
+    quiet: QuietOpt = False,
+) -> None:
+    """Per-group summaries, drift of the values over time, and the runs whose values are outliers
+    by a robust z-score (median and MAD), over a results table of hyst batch."""
+    from ..batch import require
+
+    require("pyarrow")
+    from ..batch.report import drift_figure, report
+    from ..batch.table import read_table
+
+    if not (z > 0 and z < float("inf")):
+        usage_error(f"must be a positive number, got {z}", "--z")
+    if output is not None:
+        if time is None:
+            usage_error("a figure draws the drift: give --time", "--output")
+        if output.suffix.lower() not in (".png", ".pdf", ".svg"):
+            usage_error(f"{output} must end in .png, .pdf or .svg", "--output")
+    df = read_table(table)
+    rep = report(df, by=by, time=time, values=value or (), z_limit=z)
+    if output is not None:
+        from ..batch.tasks import write_figure
+
+        write_figure(drift_figure(df, time, rep.values, by), output, inputs=[table])
+        info(f"wrote {output}", quiet)
+    if fmt == OutputFormat.json:
+        echo_json(rep.to_dict())
+    elif not quiet or fmt != OutputFormat.table:
+        from .app import echo_table
+
+        for t in _tables(rep, z):
+            echo_table(t, fmt, digits=3)
+            if fmt == OutputFormat.table:
+                typer.echo("")
