@@ -240,3 +240,9 @@ def test_a_part_is_whole_or_absent(tmp_path):
     (folder / ".k3.123.tmp").write_text("{}")
     assert set(T.read_parts(folder)) == {"k1"}
     assert not [p for p in folder.iterdir() if p.suffix == ".tmp" and p.name.startswith(".k1")]
+
+
+def test_imap_keeps_the_order_of_its_arguments():
+    from hystcli.batch.engine import imap
+
+    assert list(imap(abs, [-3, 1, -2, 5, -8], jobs=2)) == [3, 1, 2, 5, 8]

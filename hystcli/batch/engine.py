@@ -316,3 +316,28 @@ def make_engine(scheduler: str | None, jobs: int, retries: int) -> Any:
     if scheduler:
         return DaskEngine(scheduler, retries=retries)
     return LocalEngine(jobs, retries=retries)
+
+
+def imap(func: Callable[[Any], Any], args: Sequence[Any], jobs: int = 2, scheduler: str | None = None,
+         retries: int = 2) -> Iterator[Any]:
+    """``func`` over ``args`` on the batch's engine, results in the order of ``args``.
+
+    For studies that only need a parallel map (``bench/zoo.py``, ``bench/withheld.py``): the
+    same local processes or dask cluster as ``hyst batch``, the same retries after a worker
+    died, no table. Each result is yielded as soon as it and all before it are in.
+
+    Raises
+    ------
+    EngineError
+        A task that could not be run (its workers died ``retries + 1`` times, or it raised).
+    """
+    engine = make_engine(scheduler, jobs, retries)
+    got: dict[int, Any] = {}
+    nxt = 0
+    for out in engine.map(func, [Job(str(i), (lambda a=a: a)) for i, a in enumerate(args)]):
+        if out.error is not None:
+            raise EngineError(f"task {out.tag}: {out.error}")
+        got[int(out.tag)] = out.value
+        while nxt in got:
+            yield got.pop(nxt)
+            nxt += 1
