@@ -6,6 +6,7 @@ batch's progress), never slept for.
 """
 from __future__ import annotations
 
+import json
 import os
 import signal
 from pathlib import Path
@@ -109,8 +110,6 @@ SAMPLE = Path(__file__).resolve().parents[1] / "sample_data" / "ice-a"
 
 @pytest.mark.slow
 def test_identify_and_detect_shift_on_both_engines_agree_with_the_single_commands(cluster, tmp_path):
-    import json
-
     lc, _ = cluster
     sweeps = [str(SAMPLE / "sweep_knob1.csv"), str(SAMPLE / "sweep_knob2.csv")]
     local, remote = tmp_path / "id_local.parquet", tmp_path / "id_remote.parquet"
@@ -137,3 +136,58 @@ def test_identify_and_detect_shift_on_both_engines_agree_with_the_single_command
     row = pq.read_table(out).to_pylist()[0]
     assert (row["k1_offset"], row["k1_offset_lo"], row["k1_offset_hi"]) == (
         want["offset"], want["offset_lo"], want["offset_hi"])
+
+
+def _wait_for(predicate, what: str, timeout: float = 120.0) -> None:
+    """Poll until ``predicate()`` (readiness, not a fixed sleep); fail after ``timeout`` seconds."""
+    import time
+
+    end = time.monotonic() + timeout
+    while not predicate():
+        if time.monotonic() > end:
+            raise AssertionError(f"timed out waiting for {what}")
+        time.sleep(0.05)
+
+
+@pytest.mark.slow
+def test_kill_a_worker_then_ctrl_c_then_rerun_every_run_once_nothing_recomputed(cluster, tmp_path):
+    import subprocess
+    import sys
+
+    lc, client = cluster
+    client.wait_for_workers(2, timeout=120)
+    d = tmp_path / "runs"
+    d.mkdir()
+    for i in range(30):
+        write_run(d / f"r{i:02d}.csv", seed=500 + i, rows=60_000)
+    for name in ("empty.csv", "nan.csv"):
+        (d / name).write_text(BAD[name])
+    out = tmp_path / "res.parquet"
+    parts = T.parts_dir(out)
+    cmd = [sys.executable, "-m", "hystcli", "batch", "evaluate", str(d / "*.csv"), "-o", str(out),
+           "--scheduler", lc.scheduler_address, "-f", "json"]
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        count = lambda: len(list(parts.glob("*.json"))) if parts.is_dir() else 0  # noqa: E731
+        _wait_for(lambda: count() >= 3, "3 parts")
+        pid = next(iter(client.run(os.getpid).values()))
+        os.kill(pid, signal.SIGKILL)  # a worker dies mid-batch
+        _wait_for(lambda: count() >= 8, "8 parts")
+        proc.send_signal(signal.SIGINT)  # then Ctrl-C
+        _, err = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+    assert proc.returncode == 130 and "the same command resumes" in err
+    before = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("*.json")}
+    assert 8 <= len(before) < 32 and not out.exists()
+    client.wait_for_workers(2, timeout=120)
+    rerun = subprocess.run(cmd, capture_output=True, text=True, timeout=300)
+    assert rerun.returncode == 0, rerun.stderr
+    summary = json.loads(rerun.stdout)
+    assert (summary["skipped"], summary["computed"]) == (len(before), 32 - len(before))
+    assert summary["runs"] == 32 and summary["failed"] == 2
+    after = {p.name: (p.stat().st_ino, p.stat().st_mtime_ns) for p in parts.glob("*.json")}
+    assert {k: after[k] for k in before} == before and len(after) == 32
+    table = pq.read_table(out).to_pylist()
+    assert sorted(x["path"] for x in table) == sorted(str(p) for p in d.glob("*.csv"))
