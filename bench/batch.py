@@ -106,10 +106,11 @@ def task_memory(cmd: str, path: Path) -> tuple[float, float]:
     execute(pay)
     peak = tracemalloc.get_traced_memory()[1] / 2 ** 20
     tracemalloc.stop()
-    code = ("import hashlib,resource,sys;from hystcli.batch.tasks import Payload,canonical_settings,execute;"
+    code = ("import hashlib;from hystcli.batch.tasks import Payload,canonical_settings,execute;"
             f"d=open({str(path)!r},'rb').read();execute(Payload({cmd!r},canonical_settings({cmd!r},{{}}),"
             f"(({str(path)!r},hashlib.sha256(d).hexdigest(),d),)));"
-            "print(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss)")
+            # VmHWM, not ru_maxrss: the latter carries over the (large) parent's peak across fork + exec
+            "print(next(int(x.split()[1]) for x in open('/proc/self/status') if x.startswith('VmHWM')))")
     rss = int(subprocess.run([sys.executable, "-c", code], check=True, capture_output=True, text=True).stdout) / 1024
     return peak, rss
 

@@ -144,7 +144,9 @@ def test_a_killed_local_worker_is_retried_and_every_run_has_one_row(tmp_path):
     def kill_a_worker(message, done, total):
         if killed:
             return
-        workers = [p for p in psutil.Process().children() if "spawn_main" in " ".join(p.cmdline())]
+        # the pool's workers are the fork server's children
+        server = [p for p in psutil.Process().children() if "forkserver" in " ".join(p.cmdline())]
+        workers = [w for s in server for w in s.children()]
         assert workers
         workers[0].kill()
         killed.append(workers[0].pid)
@@ -246,3 +248,10 @@ def test_imap_keeps_the_order_of_its_arguments():
     from hystcli.batch.engine import imap
 
     assert list(imap(abs, [-3, 1, -2, 5, -8], jobs=2)) == [3, 1, 2, 5, 8]
+
+
+def test_the_batch_commands_help_fits_80_columns():
+    for args in (["batch"], ["batch", "identify"], ["batch", "evaluate"], ["batch", "detect-shift"],
+                 ["batch", "diagnose"], ["report"]):
+        text = runner.invoke(app, [*args, "--help"], terminal_width=80).stdout
+        assert "Usage:" in text and max(map(len, text.splitlines())) <= 80, args

@@ -5,8 +5,8 @@ finish; the caller writes each one as it comes. Both keep only a window of tasks
 (a few per worker), so a batch of thousands of runs never holds thousands of files' contents in
 memory, and both retry a task whose worker died:
 
-- :class:`LocalEngine`: a :class:`concurrent.futures.ProcessPoolExecutor` (spawned processes,
-  no server). A worker that dies breaks the whole pool: the pool is made anew and every task
+- :class:`LocalEngine`: a :class:`concurrent.futures.ProcessPoolExecutor` (processes forked by
+  a fork server, no network server). A worker that dies breaks the whole pool: the pool is made anew and every task
   that was in flight is sent again (any of them may have been the one running in the dead
   process).
 - :class:`DaskEngine`: a ``distributed.Client`` on ``tcp://host:port``. The scheduler reschedules
@@ -80,6 +80,22 @@ def _build(job: Job) -> tuple[Any, str | None]:
         return None, f"{exc.filename or ''}: cannot read ({exc.strerror or exc})"
 
 
+PRELOAD = ("hystcli.batch.tasks", "hystcli.io", "hystcli.metrics")
+"""What the fork server imports once, so that each worker it forks starts with numpy and pandas loaded."""
+
+
+def _context() -> Any:
+    # A fork server, not a plain fork: a fork of this process, which may run threads (a progress
+    # bar's, numba's), may hang; the server is forked before any of them, single-threaded. Its
+    # preloaded imports make every worker after the first start at once (a new pool after a
+    # worker died, a second batch in the same process) instead of importing numpy again (spawn).
+    if "forkserver" not in multiprocessing.get_all_start_methods():  # pragma: no cover - not Linux
+        return multiprocessing.get_context("spawn")
+    ctx = multiprocessing.get_context("forkserver")
+    ctx.set_forkserver_preload(list(PRELOAD))
+    return ctx
+
+
 class LocalEngine:
     """Local worker processes (no server).
 
@@ -102,8 +118,7 @@ class LocalEngine:
     def _pool(self) -> Any:
         from concurrent.futures import ProcessPoolExecutor
 
-        # spawn, not fork: a fork of a process with threads (numba's, a progress bar's) may hang
-        return ProcessPoolExecutor(self.jobs, mp_context=multiprocessing.get_context("spawn"))
+        return ProcessPoolExecutor(self.jobs, mp_context=_context())
 
     def map(self, func: Callable[[Any], Any], jobs: Sequence[Job]) -> Iterator[Outcome]:
         """Run ``func`` on every job's argument; yield each :class:`Outcome` as it finishes."""
@@ -113,10 +128,11 @@ class LocalEngine:
         todo = iter(jobs)
         pool = self._pool()
         flight: dict[Any, tuple[Job, Any, int]] = {}  # future -> (job, argument, attempts)
+        queue: list[tuple[Job, Any, int]] = []  # built, not yet accepted by a pool
         exhausted = False
         try:
             while True:
-                while not exhausted and len(flight) < self.window:
+                while not exhausted and len(flight) + len(queue) < self.window:
                     job = next(todo, None)
                     if job is None:
                         exhausted = True
@@ -125,26 +141,33 @@ class LocalEngine:
                     if err is not None:
                         yield Outcome(job.tag, None, err, 0)
                         continue
-                    flight[pool.submit(func, arg)] = (job, arg, 1)
-                if not flight:
-                    return
-                done, _ = wait(list(flight), return_when=FIRST_COMPLETED)
+                    queue.append((job, arg, 1))
                 broken = False
-                for fut in done:
-                    job, arg, attempts = flight.pop(fut)
+                while queue and not broken:
                     try:
-                        value = fut.result()
-                    except BrokenProcessPool:
+                        flight[pool.submit(func, queue[0][1])] = queue[0]
+                        queue.pop(0)
+                    except BrokenProcessPool:  # a worker died since the last look
                         broken = True
-                        flight[fut] = (job, arg, attempts)  # resent below with the others
-                        continue
-                    except Exception as exc:  # the function raised: pickling, a bug
-                        yield Outcome(job.tag, None, f"{type(exc).__name__}: {exc}", attempts)
-                        continue
-                    yield Outcome(job.tag, value, None, attempts)
+                if not broken:
+                    if not flight:
+                        return
+                    done, _ = wait(list(flight), return_when=FIRST_COMPLETED)
+                    for fut in done:
+                        job, arg, attempts = flight.pop(fut)
+                        try:
+                            value = fut.result()
+                        except BrokenProcessPool:
+                            broken = True
+                            flight[fut] = (job, arg, attempts)  # sent again below with the others
+                            continue
+                        except Exception as exc:  # the function raised: pickling, a bug
+                            yield Outcome(job.tag, None, f"{type(exc).__name__}: {exc}", attempts)
+                            continue
+                        yield Outcome(job.tag, value, None, attempts)
                 if broken:
                     # a dead worker breaks every future of the pool: a new pool, and every task
-                    # in flight sent again (any of them may have killed it)
+                    # that was in flight sent again (any of them may have killed it)
                     self.stats.workers_lost += 1
                     _kill(pool)
                     pool = self._pool()
@@ -155,7 +178,7 @@ class LocalEngine:
                             yield Outcome(job.tag, None, f"a worker died running it {attempts} time(s)", attempts)
                             continue
                         self.stats.retried += 1
-                        flight[pool.submit(func, arg)] = (job, arg, attempts + 1)
+                        queue.append((job, arg, attempts + 1))
         finally:
             if flight:
                 _kill(pool)  # interrupted: what is in flight is lost, what was written is not
