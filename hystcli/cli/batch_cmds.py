@@ -70,7 +70,8 @@ def _run(command_name: str, runs: Optional[List[str]], manifest: Optional[Path],
         res = core.run_batch(pl, output, scheduler=scheduler, jobs=jobs, retries=retries,
                              progress=lambda message, done, total: update(message, done, total))
     if res.interrupted:
-        fail(f"interrupted: {res.computed + res.skipped} of {res.tasks} task(s) are kept in {res.parts}; "
+        rerun = f" ({res.retried} rerun after a worker died)" if res.retried else ""
+        fail(f"interrupted: {res.computed + res.skipped} of {res.tasks} task(s) are kept in {res.parts}{rerun}; "
              "the same command resumes", 130)
     counts: dict[str, int] = {}
     for _, status, _ in res.failures:
