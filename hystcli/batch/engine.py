@@ -118,7 +118,7 @@ class LocalEngine:
     def _pool(self) -> Any:
         from concurrent.futures import ProcessPoolExecutor
 
-        return ProcessPoolExecutor(self.jobs, mp_context=_context())
+        return ProcessPoolExecutor(self.jobs, mp_context=_context(), initializer=_ignore_ctrl_c)
 
     def map(self, func: Callable[[Any], Any], jobs: Sequence[Job]) -> Iterator[Outcome]:
         """Run ``func`` on every job's argument; yield each :class:`Outcome` as it finishes."""
@@ -184,6 +184,14 @@ class LocalEngine:
                 _kill(pool)  # interrupted: what is in flight is lost, what was written is not
             else:
                 pool.shutdown(wait=True)
+
+
+def _ignore_ctrl_c() -> None:
+    # Ctrl-C on a terminal reaches the whole process group: the client handles it (keeps what
+    # is written, ends the workers); a worker that handled it too would print a traceback
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _kill(pool: Any) -> None:
