@@ -150,7 +150,7 @@ def main(argv: list[str] | None = None) -> int:
     ev, idf = generate(work, args.n, args.identify_n)
     load = os.getloadavg()
     res: dict = {"n": args.n, "identify_n": args.identify_n, "load_before": load}
-    with LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=None,
+    with LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=":0",
                       silence_logs=50) as lc:
         for cmd, folder, n in (("evaluate", ev, args.n), ("identify", idf, args.identify_n)):
             lo, da = work / f"{cmd}_local.parquet", work / f"{cmd}_dask.parquet"
