@@ -37,7 +37,6 @@ import os
 import sys
 import time
 from collections import Counter
-from concurrent.futures import ProcessPoolExecutor
 
 import numpy as np
 
@@ -212,6 +211,11 @@ def summary(results: list[dict], seed: int, seconds: float) -> str:
     return "\n".join(x for x in lines if x is not None)
 
 
+def _run_pair(pair: tuple) -> dict:
+    """:func:`run_case` on one ``(spec, extra)`` pair (the engine maps one argument)."""
+    return run_case(*pair)
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seed", type=int, default=1, help="suite seed (0 = the design set; 1 and up held out)")
@@ -219,6 +223,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--only", default=None, help="comma-separated effect names (or none) to keep")
     ap.add_argument("--quick", action="store_true", help="six cases: a null, creep, coupling, lag, friction, a pair")
     ap.add_argument("--jobs", type=int, default=min(2, os.cpu_count() or 1))
+    ap.add_argument("--scheduler", default=None, help="a dask scheduler (tcp://host:8786) instead of local processes")
     ap.add_argument("--json", default=None, help="write per-case results here")
     ap.add_argument("--verbose", action="store_true", help="one line per case on stderr")
     args = ap.parse_args(argv)
@@ -227,19 +232,20 @@ def main(argv: list[str] | None = None) -> int:
     specs = select(C.suite_specs(args.seed), args.only, args.n, args.quick)
     t0 = time.perf_counter()
     results = []
-    with ProcessPoolExecutor(max_workers=max(1, args.jobs)) as pool:
-        for r in pool.map(run_case, [s for s, _ in specs], [e for _, e in specs]):
-            results.append(r)
-            if args.verbose:
-                if r["status"] == "ok":
-                    print(f"{r['seed']:6d} {'+'.join(f'{a}[{f}]' for a, f in zip(r['truth'], r['forms'])) or 'null':42s}"
-                          f" {','.join(r['strengths']):12s} -> {'+'.join(r['chosen']) or 'none':24s} "
-                          f"{r['rmse_before']:5.2f}->{r['rmse_after']:5.2f} ({r['shrink']:5.1f} %) "
-                          f"{r['diagnose_seconds']:4.1f}s {r['ranking'][:3]} {r['follows'][:2]}",
-                          file=sys.stderr, flush=True)
-                else:
-                    print(f"{r['seed']:6d} {'+'.join(r['truth']) or 'null':42s} refused: {r['error'][:90]}",
-                          file=sys.stderr, flush=True)
+    from hystcli.batch.engine import imap  # hyst batch's engine: local processes or a dask cluster
+
+    for r in imap(_run_pair, specs, jobs=max(1, args.jobs), scheduler=args.scheduler):
+        results.append(r)
+        if args.verbose:
+            if r["status"] == "ok":
+                print(f"{r['seed']:6d} {'+'.join(f'{a}[{f}]' for a, f in zip(r['truth'], r['forms'])) or 'null':42s}"
+                      f" {','.join(r['strengths']):12s} -> {'+'.join(r['chosen']) or 'none':24s} "
+                      f"{r['rmse_before']:5.2f}->{r['rmse_after']:5.2f} ({r['shrink']:5.1f} %) "
+                      f"{r['diagnose_seconds']:4.1f}s {r['ranking'][:3]} {r['follows'][:2]}",
+                      file=sys.stderr, flush=True)
+            else:
+                print(f"{r['seed']:6d} {'+'.join(r['truth']) or 'null':42s} refused: {r['error'][:90]}",
+                      file=sys.stderr, flush=True)
     dt = time.perf_counter() - t0
     if args.json:
         with open(args.json, "w") as fh:

@@ -35,7 +35,6 @@ import math
 import sys
 import time
 from collections import defaultdict
-from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
@@ -284,6 +283,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=100000)
     ap.add_argument("--only", choices=COMMANDS, action="append")
     ap.add_argument("--jobs", type=int, default=1)
+    ap.add_argument("--scheduler", default=None, help="a dask scheduler (tcp://host:8786) instead of local processes")
     ap.add_argument("--cases", type=Path)
     ap.add_argument("--load", type=Path, nargs="+", help="summarise stored --cases files (pooled) instead of running")
     ap.add_argument("--reference", action="store_true",
@@ -295,9 +295,10 @@ def main() -> None:
     commands = args.only or list(COMMANDS)
     work = [(args.plants, cmd, s, args.reference) for cmd in commands for s in range(args.seed, args.seed + args.n)]
     t0 = time.perf_counter()
-    if args.jobs > 1:
-        with ProcessPoolExecutor(args.jobs) as ex:
-            cases = list(ex.map(score_case, work, chunksize=4))
+    if args.jobs > 1 or args.scheduler:
+        from hystcli.batch.engine import imap  # hyst batch's engine: local processes or a dask cluster
+
+        cases = list(imap(score_case, work, jobs=args.jobs, scheduler=args.scheduler))
     else:
         cases = [score_case(w) for w in work]
     if args.cases is not None:

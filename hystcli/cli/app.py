@@ -30,7 +30,7 @@ HELP_PANELS: dict[str, tuple[str, ...]] = {
     "Calibrate": ("identify", "check", "import"),
     "On the robot": ("detect-shift", "compensate", "track", "play", "sweep", "status", "home", "jog",
                      "sim-robot"),
-    "Evaluate": ("evaluate", "diagnose", "predict"),
+    "Evaluate": ("evaluate", "diagnose", "predict", "batch", "report"),
     "Simulate": ("simulate", "demo"),
     "Data and models": ("show", "diff", "rotate-shift"),
 }
@@ -220,21 +220,27 @@ def command(name: str, summary: str, **kwargs: Any) -> Callable:
     panel = next((title for title, names in HELP_PANELS.items() if name in names), None)
 
     def decorator(func: Callable) -> Callable:
-        @functools.wraps(func)
-        def wrapper(*args: Any, **kw: Any) -> Any:
-            try:
-                return func(*args, **kw)
-            except HystError as exc:
-                fail(first_line(exc))
-            except KeyboardInterrupt:
-                fail("interrupted", 130)
-            except OSError as exc:
-                fail(f"{exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}")
-
         return app.command(name=name, cls=_Command, short_help=summary, rich_help_panel=panel,
-                           **kwargs)(wrapper)
+                           **kwargs)(guarded(func))
 
     return decorator
+
+
+def guarded(func: Callable) -> Callable:
+    """``func`` with hyst errors turned into ``Error: ...`` and exit 1, Ctrl-C into exit 130 (what
+    :func:`command` registers; a command group of its own, ``hyst batch``, wraps with it too)."""
+    @functools.wraps(func)
+    def wrapper(*args: Any, **kw: Any) -> Any:
+        try:
+            return func(*args, **kw)
+        except HystError as exc:
+            fail(first_line(exc))
+        except KeyboardInterrupt:
+            fail("interrupted", 130)
+        except OSError as exc:
+            fail(f"{exc.filename or ''}{': ' if exc.filename else ''}{exc.strerror or exc}")
+
+    return wrapper
 
 
 # --------------------------------------------------------------------------------------------
