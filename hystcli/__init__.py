@@ -32,7 +32,7 @@ layer or the ones below, never from a layer above, and no two modules import eac
 circle (tests/test_layers.py reads every import with ``ast`` and fails on either). The core
 imports neither typer, rich nor matplotlib.
 
-1. foundation: errors, estimates, settings, names, filters;
+1. foundation: errors, estimates, settings, names, filters, thread pools;
 2. signal: conditioning and reading the motor current;
 3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
 4. io: runs and models in files, the import of foreign logs (:mod:`hystcli.io`);
@@ -59,7 +59,7 @@ from .errors import (DataError, DeviceError, HystError, IdentificationError, Lin
 __version__ = "0.1.0"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "estimate", "settings", "names", "filters"),
+    ("errors", "estimate", "settings", "names", "filters", "threads"),
     ("signal",),
     ("core", "model"),
     ("io",),

@@ -96,7 +96,7 @@ def _pin() -> None:
     # single command computes, bit for bit, and two workers on two cores do not fight.
     global _PINNED
     if not _PINNED:
-        from ..__main__ import pin_threads
+        from ..threads import pin_threads
 
         pin_threads()
         _PINNED = True
@@ -201,7 +201,7 @@ def _num(x: Any) -> float | None:
 
 
 def _identify(run: Any, payload: Payload, s: dict, warnings: list[str]) -> dict:
-    from ..identify import identify
+    from ..identification import identify
     from ..settings import Settings
 
     result = identify(run, omega=s["omega"], use_tip=not s["current_only"],
@@ -264,7 +264,7 @@ def _diagnose(payload: Payload, s: dict, runs: dict[str, Any], out: dict[str, di
     # one diagnosis per session, its findings on every run of it; a run that cannot be read is
     # left out of the session (its own row says why) rather than failing the others
     from ..check import require_shape
-    from ..diagnose import diagnose
+    from ..diagnosis import diagnose
 
     good = [sha for _, sha, _ in payload.runs if sha in runs]
     try:
@@ -299,7 +299,7 @@ def _diagnose(payload: Payload, s: dict, runs: dict[str, Any], out: dict[str, di
 
 def text_table(columns: Sequence[str], headers: Sequence[str], rows: Sequence[tuple], notes: Sequence[str] = ()) -> Any:
     """A :class:`hystcli.metrics.Table` (what ``--format`` table/markdown/csv renders), for ``hyst report``."""
-    from ..metrics import Table
+    from ..report.table import Table
 
     return Table(tuple(columns), tuple(headers), tuple(rows), tuple(notes))
 
