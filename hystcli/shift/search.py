@@ -31,7 +31,7 @@ and live run this same code over different probes (:mod:`.probe`, ``hystcli.devi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any, Callable, Mapping
 
@@ -576,7 +576,27 @@ def detect_shifts(model: Model, probes: Mapping[int, Any], **options: Any) -> di
     return {k: detect_shift(model, probes[k], k, **options) for k in sorted(probes)}
 
 
-def apply_shift(model: Model, results: Mapping[int, ShiftResult] | Any) -> Model:
-    """The model with each detected knob's ``offset`` set (absolute), others unchanged."""
+def apply_shift(model: Model, results: Mapping[int, ShiftResult] | Any, *, source: str | None = None,
+                sha256: str | None = None) -> Model:
+    """The model with each detected knob's ``offset`` set (absolute), others unchanged.
+
+    Parameters
+    ----------
+    model : Model
+    results : mapping of knob to ShiftResult, or iterable of ShiftResult
+    source : str, optional
+        Where the shift was found (a replay's file name, ``live:PORT``): kept in the model's
+        metadata as ``shift_source``, so a shifted model says what it was shifted by.
+    sha256 : str, optional
+        The replay file's SHA-256, kept as ``shift_sha256``.
+    """
     items = results.values() if isinstance(results, Mapping) else results
-    return model.with_offsets({r.knob: r.offset for r in items})
+    shifted = model.with_offsets({r.knob: r.offset for r in items})
+    if source is None and sha256 is None:
+        return shifted
+    meta = dict(shifted.meta)
+    if source is not None:
+        meta["shift_source"] = source
+    if sha256 is not None:
+        meta["shift_sha256"] = sha256
+    return replace(shifted, meta=meta)
