@@ -31,15 +31,16 @@ and live run this same code over different probes (:mod:`.probe`, ``hystcli.devi
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ..errors import HystError, ShiftDetectionError
+from ..errors import HystError, ParameterError, ShiftDetectionError
 from ..estimate import Estimate
-from ..io import Run
+from ..io import Run, read_run
 from ..model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
@@ -448,9 +449,10 @@ def _offset_interval(edge: _Edge, ref: Reference) -> tuple[float, float]:
     return off - below, off + above
 
 
-def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings = DEFAULT,
+def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings: Settings = DEFAULT,
                  eps_upper: float | None = None, step: float = 0.5, max_steps: int | None = None,
                  max_travel: float | None = None, direction: int | None = None, return_home: bool = True,
+                 false_alarm: float | None = None,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
     """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
@@ -458,12 +460,17 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     ----------
     model : Model
         The straight-shaft model, with the identification sweep's reading of the current.
-    probe : Probe or Run
+    probe : Probe, Run or path-like
         Steps the knob and reads the current (:class:`.probe.ReplayProbe`, a live device probe);
-        a recorded replay (:class:`hystcli.io.Run`) is read through a :class:`.probe.ReplayProbe`.
-    knob : int
+        a recorded replay (:class:`hystcli.io.Run`, or its CSV file) is read through a
+        :class:`.probe.ReplayProbe`.
+    knob : int, optional
+        Default: the probe's own knob; for a replay, the one knob of the model it records; else
+        the model's only knob.
     settings : Settings
         The level, the false-alarm rate, the widest offset interval returned.
+    false_alarm : float, optional
+        Replaces ``settings.false_alarm`` (a script need not build a :class:`Settings` for it).
     eps_upper : float, optional
         Contact slope (mA/deg); default the settings' contact factor times the sweep's loaded slope.
     step : float
@@ -483,9 +490,27 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     ------
     ShiftDetectionError
         No edge within the limits, an offset known less well than the settings allow, no side
-        with a reference. Every error raised during the search has stopped the probe and returned
-        the knob first; its message says so.
+        with a reference, a search option out of range. Every error raised during the search has
+        stopped the probe and returned the knob first; its message says so.
+    ParameterError
+        No ``knob`` given and none to default to; ``false_alarm`` outside (0, 0.5).
+    ModelError
+        A knob the model does not have.
+
+    Examples
+    --------
+    >>> import hystcli
+    >>> model = hystcli.load_model("model.json")  # doctest: +SKIP
+    >>> shift = hystcli.detect_shift(model, "replay_alpha90_knob1.csv", false_alarm=1e-4)  # doctest: +SKIP
     """
+    from .request import ShiftRequest, select_knobs
+
+    if isinstance(probe, (str, os.PathLike)):
+        probe = read_run(probe)
+    if false_alarm is not None:
+        settings = ShiftRequest(false_alarm=false_alarm, settings=settings).options()["settings"]
+    if knob is None:
+        knob = _default_knob(model, probe, select_knobs)
     k = int(knob)
     if isinstance(probe, Run):
         probe = ReplayProbe(probe, k)
@@ -510,6 +535,20 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         if not returned:
             raise ShiftDetectionError(f"knob {k}: edge found at {edge.at:.2f} deg, but {note}")
     return _result(k, model.knob(k), edge, ref, search, returned, float(step))
+
+
+def _default_knob(model: Model, probe: Any, select_knobs: Callable) -> int:
+    """The knob a search without one means: the probe's, the replay's one knob, the model's only one."""
+    if isinstance(probe, Run):
+        knobs = select_knobs(model, None, probe)
+    elif getattr(probe, "knob", None) is not None:
+        return int(probe.knob)
+    else:
+        knobs = list(model.knobs)
+    if len(knobs) != 1:
+        where = "the replay records" if isinstance(probe, Run) else "the model has"
+        raise ParameterError("knob", f"{where} knobs {', '.join(map(str, knobs))}: say which to search")
+    return int(knobs[0])
 
 
 def _limits(model: Model, k: int, probe: Any, ref: Reference, step: float, max_travel: float | None,
