@@ -496,12 +496,6 @@ def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings:
         No ``knob`` given and none to default to; ``false_alarm`` outside (0, 0.5).
     ModelError
         A knob the model does not have.
-
-    Examples
-    --------
-    >>> import hystcli
-    >>> model = hystcli.load_model("model.json")  # doctest: +SKIP
-    >>> shift = hystcli.detect_shift(model, "replay_alpha90_knob1.csv", false_alarm=1e-4)  # doctest: +SKIP
     """
     from .request import ShiftRequest, select_knobs
 
