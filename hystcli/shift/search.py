@@ -47,6 +47,7 @@ from ..signal.pwl import fit_piecewise, knot_interval, profile
 from ..signal.reading import _classify
 from ..signal.result import orientation
 from .probe import ProbeSample, ReplayExhausted, ReplayProbe, return_knob
+from .request import ShiftRequest, select_knobs
 from .result import Evidence, ShiftResult
 
 __all__ = ["Reference", "reference_of", "detect_shift", "default_max_travel", "DEFAULT_MAX_TRAVEL"]
@@ -497,14 +498,12 @@ def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings:
     ModelError
         A knob the model does not have.
     """
-    from .request import ShiftRequest, select_knobs
-
     if isinstance(probe, (str, os.PathLike)):
         probe = read_run(probe)
     if false_alarm is not None:
         settings = ShiftRequest(false_alarm=false_alarm, settings=settings).options()["settings"]
     if knob is None:
-        knob = _default_knob(model, probe, select_knobs)
+        knob = _default_knob(model, probe)
     k = int(knob)
     if isinstance(probe, Run):
         probe = ReplayProbe(probe, k)
@@ -531,7 +530,7 @@ def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings:
     return _result(k, model.knob(k), edge, ref, search, returned, float(step))
 
 
-def _default_knob(model: Model, probe: Any, select_knobs: Callable) -> int:
+def _default_knob(model: Model, probe: Any) -> int:
     """The knob a search without one means: the probe's, the replay's one knob, the model's only one."""
     if isinstance(probe, Run):
         knobs = select_knobs(model, None, probe)
