@@ -54,7 +54,7 @@ import importlib
 from typing import Any
 
 from .errors import (DataError, DeviceError, HystError, IdentificationError, LinkError, ModelError,
-                     SafetyStop, ShiftDetectionError)
+                     ParameterError, SafetyStop, ShiftDetectionError)
 
 __version__ = "0.1.0"
 
@@ -87,7 +87,7 @@ _LAZY = {
 
 __all__ = [
     "Compensator", "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
-    "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Settings", "Shape",
+    "KnobModel", "LinkError", "Model", "ModelError", "ParameterError", "Run", "SafetyStop", "Settings", "Shape",
     "ShiftDetectionError", "compensate", "detect_shift", "diagnose", "evaluate", "identify", "load_model",
     "predict", "read_run", "save_model", "write_run", "__version__",
 ]

@@ -16,6 +16,32 @@ class DataError(HystError):
     """A run CSV (or other input data) is missing, unreadable or inconsistent."""
 
 
+class ParameterError(HystError, ValueError):
+    """A setting given to a library function is outside its domain (a step that is not positive, a
+    false-alarm rate of 0.7).
+
+    Parameters
+    ----------
+    parameter : str
+        The parameter at fault, as the library function names it (``"step"``, ``"false_alarm"``).
+    reason : str
+        What is wrong with its value, e.g. ``"must be a positive number, got -1.0"``.
+
+    The message is ``"parameter: reason"``; the command line shows :attr:`reason` against the
+    option the user typed for :attr:`parameter` (a usage error, exit 2).
+    """
+
+    def __init__(self, parameter: str, reason: str) -> None:
+        super().__init__(f"{parameter}: {reason}")
+        self.parameter = parameter
+        self.reason = reason
+
+    def __reduce__(self) -> tuple:
+        # two arguments, not the one message: keeps the error intact through pickling (a batch
+        # worker's error comes back to the client pickled)
+        return type(self), (self.parameter, self.reason)
+
+
 class ModelError(HystError):
     """A model file or model parameters are invalid (names the violated condition)."""
 

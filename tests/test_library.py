@@ -61,7 +61,7 @@ def _module_examples(name: str) -> doctest.TestResults:
     return doctest.testmod(module, optionflags=doctest.ELLIPSIS, report=False)
 
 
-@pytest.mark.parametrize("name", ["hystcli.stream", "hystcli.io.files", "hystcli.cli.app"])
+@pytest.mark.parametrize("name", ["hystcli.stream", "hystcli.io.files", "hystcli.cli.app", "hystcli.shift.request"])
 def test_the_docstring_examples_run(name):
     importlib.import_module(name)
     res = _module_examples(name)

@@ -4,7 +4,7 @@ Command modules (``hystcli/cli/*_cmds.py``) register their commands with :func:`
 wraps each one so that any :class:`~hystcli.errors.HystError` becomes one line ``Error: ...`` on
 stderr and exit code 1, and Ctrl-C exit code 130, never a traceback. Usage errors exit with code 2:
 typer's own, and those a command finds after parsing (:func:`usage_error`,
-:func:`option_errors`). Long work reports through :func:`progress`.
+:func:`option_errors`, :func:`parameter_errors`). Long work reports through :func:`progress`.
 
 This module is imported by ``hyst --help``: it imports typer and nothing heavy (rich only when a
 progress bar is drawn on a terminal).
@@ -24,7 +24,7 @@ import typer
 from typer.core import TyperArgument, TyperCommand, TyperGroup
 
 from .. import __version__
-from ..errors import HystError
+from ..errors import HystError, ParameterError
 
 HELP_PANELS: dict[str, tuple[str, ...]] = {
     "Calibrate": ("identify", "check", "import"),
@@ -129,6 +129,25 @@ def option_errors(param: str) -> Iterator[None]:
         yield
     except HystError as exc:
         usage_error(first_line(exc), param)
+
+
+@contextlib.contextmanager
+def parameter_errors(options: dict[str, str]) -> Iterator[None]:
+    """Turn a library's :class:`~hystcli.errors.ParameterError` into a usage error (exit 2) against
+    the option the user typed for the parameter.
+
+    Parameters
+    ----------
+    options : dict of str to str
+        Library parameter -> its option, e.g. ``{"mean": "--mean-window"}``. A parameter not listed
+        is no option's (the command passed it itself): its error stays a hyst error (exit 1).
+    """
+    try:
+        yield
+    except ParameterError as exc:
+        if exc.parameter not in options:
+            raise
+        usage_error(exc.reason, options[exc.parameter])
 
 
 @contextlib.contextmanager

@@ -1,16 +1,15 @@
 """`hyst detect-shift`: Algorithm 1 on a recorded replay (``REPLAY.csv``) or a live robot (``--port``).
 
-Parses the options, opens one probe per knob (a :class:`hystcli.shift.ReplayProbe` over the
-replay, or a ``hystcli.device.DeviceProbe`` per knob on one connection to the serial port), calls
-:func:`hystcli.shift.detect_shift` per knob, renders the offsets, and writes the shifted model
-(:func:`hystcli.shift.apply_shift`) atomically. Nothing is written unless every knob succeeded.
+Parses the options, calls :func:`hystcli.shift.run_detect_shift` on the replay or on a
+:class:`hystcli.device.LiveProbes` (which checks the knobs and every setting before anything
+moves), renders the offsets, and writes the shifted model (:func:`hystcli.shift.apply_shift`)
+atomically. Nothing is written unless every knob succeeded.
 """
 from __future__ import annotations
 
-import contextlib
 import math
 from pathlib import Path
-from typing import Annotated, Any, Iterator, Optional
+from typing import Annotated, Any, Optional
 
 import typer
 
@@ -18,41 +17,15 @@ from .. import device
 from .. import shift as shift_mod
 from ..errors import DataError
 from ..io import all_or_none, check_not_input, dumps_model, file_sha256, load_model
-from ..model import Model
 from .app import (BaudOpt, ColumnsOpt, FormatOpt, OutputFormat, OutOpt, ModelOpt, PlotOpt, PortOpt, QuietOpt,
-                  columns_mapping, command, echo_json, echo_table, info, load_run, one_of, parse_knobs,
-                  usage_error)
+                  columns_mapping, command, echo_json, echo_table, info, load_run, one_of, parameter_errors,
+                  parse_knobs, usage_error)
 from .robot_opts import TimeoutOpt
 
-
-@contextlib.contextmanager
-def _probes(model: Model, knobs: list[int] | None, replay: Path | None, port: str | None,
-            baud: int, current_ceiling: float | None = None, speed: float | None = None,
-            dwell: float = device.DEFAULT_DWELL, mean: float = device.DEFAULT_MEAN,
-            timeout: float = 1.0, columns: Any = None, quiet: bool = False) -> Iterator[tuple[dict[int, Any], Any]]:
-    """Yield ``({knob: probe}, run or None)``; live probes share one connection, closed (motors
-    stopped) on the way out."""
-    if replay is not None:
-        run = load_run(replay, columns, quiet=quiet)
-        if knobs is None:
-            knobs = [k for k in model.knobs if f"q{k}" in run]
-            if not knobs:
-                raise DataError(f"{replay}: the replay records none of the model's knobs "
-                                f"(no column {' or '.join(f'q{k}' for k in model.knobs)})")
-        for k in knobs:
-            model.knob(k)
-        yield {k: shift_mod.ReplayProbe(run, k) for k in knobs}, run
-        return
-    knobs = list(model.knobs) if knobs is None else knobs
-    for k in knobs:
-        model.knob(k)
-    if baud <= 0:  # pyserial's own refusal would come out as a link error (exit 1)
-        raise typer.BadParameter(f"must be a positive number, got {baud}", param_hint="--baud")
-    # one connection for every knob: one handshake, and no second open of a port that a
-    # device (or an OS) may hold exclusively
-    with device.Device(port, baud, timeout) as dev:
-        yield {k: device.DeviceProbe(dev, k, current_ceiling=current_ceiling, speed=speed,
-                                     dwell=dwell, mean=mean) for k in knobs}, None
+# the library's parameter -> the option that sets it (a bad value is a usage error against it)
+_OPTIONS = {"step": "--step", "max_travel": "--max-travel", "max_steps": "--max-steps", "eps_upper": "--eps-upper",
+            "false_alarm": "--false-alarm", "current_ceiling": "--current-ceiling", "speed": "--speed",
+            "dwell": "--dwell", "mean": "--mean-window", "baud": "--baud", "timeout": "--timeout"}
 
 
 def _notes(r: shift_mod.ShiftResult) -> list[str]:
@@ -171,65 +144,35 @@ def detect_shift_cmd(
         usage_error("give exactly one of REPLAY.csv or --port PORT", "REPLAY.csv / --port")
     if columns is not None and replay is None:
         usage_error("--columns reads a REPLAY.csv; a live search (--port) reads no file", "--columns")
-    for name, v in (("--step", step), ("--max-travel", max_travel), ("--current-ceiling", current_ceiling),
-                    ("--speed", speed)):
-        if v is not None and not (math.isfinite(v) and v > 0):
-            raise typer.BadParameter(f"must be a positive number, got {v}", param_hint=name)
-    for name, v in (("--dwell", dwell), ("--mean-window", mean_window)):
-        if not (math.isfinite(v) and 0 <= v <= device.MAX_DWELL):
-            raise typer.BadParameter(f"must be between 0 and {device.MAX_DWELL:g} s, got {v}", param_hint=name)
-    if max_steps is not None and max_steps < 1:
-        raise typer.BadParameter(f"must be at least 1, got {max_steps}", param_hint="--max-steps")
-    if eps_upper is not None and not (math.isfinite(eps_upper) and eps_upper > 0):
-        raise typer.BadParameter(f"must be a positive number, got {eps_upper}", param_hint="--eps-upper")
-    if not 0.0 < false_alarm < 0.5:
-        raise typer.BadParameter(f"must be in (0, 0.5), got {false_alarm}", param_hint="--false-alarm")
+    with parameter_errors(_OPTIONS):
+        request = shift_mod.ShiftRequest(step=step, max_steps=max_steps, max_travel=max_travel, eps_upper=eps_upper,
+                                         false_alarm=false_alarm)
+        # the live settings are checked with a replay too (a typo is refused either way); the baud
+        # rate only where a port is opened
+        live = device.LiveProbes(port, baud if port is not None else 115200, timeout, current_ceiling, speed,
+                                 dwell, mean_window)
     inputs = [model_path] + ([replay] if replay is not None else [])
-    # refuse a bad output before anything moves
-    check_not_input(output, inputs)
-    if plot is not None:
-        check_not_input(plot, inputs)
-        if plot.resolve() == output.resolve():
-            raise typer.BadParameter("the plot and the output must be different files", param_hint="--plot")
-    for target in [output] + ([plot] if plot is not None else []):
-        folder = target.parent if str(target.parent) else Path(".")
-        if not folder.is_dir():
-            raise DataError(f"{target}: the folder {folder} does not exist")
-
+    _check_outputs(output, plot, inputs)  # refuse a bad output before anything moves
     mapping = columns_mapping(columns)
-    knob_sel = parse_knobs(knob)
+    knobs = parse_knobs(knob)
     model = load_model(model_path)
-    knobs = None if knob_sel is None else list(knob_sel)
-    from ..settings import Settings
+    run = None if replay is None else load_run(replay, mapping, quiet=quiet)
 
-    options = dict(eps_upper=eps_upper, settings=Settings(false_alarm=false_alarm), step=step, max_steps=max_steps,
-                   max_travel=max_travel)
-    results: dict[int, shift_mod.ShiftResult] = {}
-    with _probes(model, knobs, replay, port, baud, current_ceiling, speed, dwell, mean_window,
-                 timeout, mapping, quiet) as (probes, run):
-        for k, probe in probes.items():
-            progress = None
-            if port is not None and not quiet:
-                def progress(s, w, k=k):  # noqa: ANN001 - live progress on stderr
-                    slope = "" if math.isnan(w) else f", slope {w:.2f} mA/deg"
-                    info(f"knob {k}: q {s.q:+.2f} deg, current {s.current:.1f} mA{slope}")
-            info(f"knob {k}: searching the dead-zone edge ...", quiet)
-            results[k] = shift_mod.detect_shift(model, probe, k, progress=progress, **options)
+    def progress(k: int, s: Any, w: float) -> None:  # live progress on stderr
+        slope = "" if math.isnan(w) else f", slope {w:.2f} mA/deg"
+        info(f"knob {k}: q {s.q:+.2f} deg, current {s.current:.1f} mA{slope}")
 
-    shifted = shift_mod.apply_shift(model, results)
-    meta = dict(shifted.meta)
-    if replay is not None:
-        meta["shift_source"] = replay.name
-        meta["shift_sha256"] = file_sha256(replay)
-    else:
-        meta["shift_source"] = f"live:{port}"
-    shifted = Model(shifted.knobs, shifted.geometry, shifted.effects, meta, shifted.identification)
+    results = shift_mod.run_detect_shift(
+        model, run, live=None if port is None else live, knobs=knobs, request=request, name=replay,
+        started=lambda k: info(f"knob {k}: searching the dead-zone edge ...", quiet),
+        progress=progress if port is not None and not quiet else None)
+
+    shifted = shift_mod.apply_shift(model, results, source=f"live:{port}" if replay is None else replay.name,
+                                    sha256=None if replay is None else file_sha256(replay))
     # the model and the figure together or neither
     with all_or_none() as pending:
         if plot is not None:
-            background = None
-            if run is not None:
-                background = {k: (run[f"q{k}"], run[f"c{k}"]) for k in results}
+            background = None if run is None else {k: (run[f"q{k}"], run[f"c{k}"]) for k in results}
             shift_mod.plot_shift(list(results.values()), pending.path(plot, inputs=inputs), model=model,
                                  background=background)
         pending.write_text(output, dumps_model(shifted), inputs=inputs)
@@ -240,3 +183,16 @@ def detect_shift_cmd(
         echo_table(_table(results, output), fmt)
     elif not quiet:
         typer.echo(_text(results, output))
+
+
+def _check_outputs(output: Path, plot: Path | None, inputs: list[Path]) -> None:
+    """Refuse an output that would overwrite an input or the other output, or whose folder is missing."""
+    check_not_input(output, inputs)
+    if plot is not None:
+        check_not_input(plot, inputs)
+        if plot.resolve() == output.resolve():
+            usage_error("the plot and the output must be different files", "--plot")
+    for target in [output] + ([plot] if plot is not None else []):
+        folder = target.parent if str(target.parent) else Path(".")
+        if not folder.is_dir():
+            raise DataError(f"{target}: the folder {folder} does not exist")

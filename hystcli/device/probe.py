@@ -7,12 +7,15 @@ the dwell, when the device offers the optional protocol features ``dwell`` and `
 """
 from __future__ import annotations
 
-from typing import Any
+import contextlib
+import math
+from dataclasses import dataclass
+from typing import Any, Iterator, Sequence
 
-from ..errors import DeviceError, SafetyStop
+from ..errors import DeviceError, ParameterError, SafetyStop
 from ..shift import ProbeSample
 from .driver import Device
-from .protocol import Sample
+from .protocol import MAX_DWELL, Sample
 
 
 DEFAULT_DWELL = 0.35
@@ -170,3 +173,58 @@ def open_probe(port: Any, baud: int = 115200, knob: int = 1, *, timeout: float =
         device.stop()
         device.close()
         raise
+
+
+@dataclass(frozen=True)
+class LiveProbes:
+    """A live robot as the source of a shift detection (:func:`hystcli.shift.run_detect_shift`):
+    one connection, a :class:`DeviceProbe` per knob. Its settings are checked when made.
+
+    Parameters
+    ----------
+    port : str or pyserial-like object
+    baud : int
+    timeout : float
+        Deadline of each reply, s, beyond the motion's own duration and any dwell.
+    current_ceiling, speed, dwell, mean
+        As in :class:`DeviceProbe`.
+
+    Raises
+    ------
+    ParameterError
+        A setting outside its domain: a baud rate, timeout, ceiling or speed that is not a positive
+        number, a dwell or window outside [0, :data:`~hystcli.device.protocol.MAX_DWELL`] s.
+    """
+
+    port: Any
+    baud: int = 115200
+    timeout: float = 1.0
+    current_ceiling: float | None = 2000.0
+    speed: float | None = None
+    dwell: float | None = DEFAULT_DWELL
+    mean: float | None = DEFAULT_MEAN
+
+    def __post_init__(self) -> None:
+        # checked here, before any port is opened: pyserial's own refusal of a bad baud rate
+        # would come out as a link error
+        for name in ("timeout", "current_ceiling", "speed"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and v > 0):
+                raise ParameterError(name, f"must be a positive number, got {v}")
+        for name in ("dwell", "mean"):
+            v = getattr(self, name)
+            if v is not None and not (math.isfinite(v) and 0 <= v <= MAX_DWELL):
+                raise ParameterError(name, f"must be between 0 and {MAX_DWELL:g} s, got {v}")
+        if self.baud <= 0:
+            raise ParameterError("baud", f"must be a positive number, got {self.baud}")
+
+    @contextlib.contextmanager
+    def open(self, knobs: Sequence[int]) -> Iterator[dict[int, DeviceProbe]]:
+        """Yield ``{knob: probe}`` on one connection; closed (motors stopped) on the way out.
+
+        One connection for every knob: one handshake, and no second open of a port that a device
+        (or an OS) may hold exclusively.
+        """
+        with Device(self.port, self.baud, self.timeout) as dev:
+            yield {k: DeviceProbe(dev, k, current_ceiling=self.current_ceiling, speed=self.speed,
+                                  dwell=self.dwell, mean=self.mean) for k in knobs}

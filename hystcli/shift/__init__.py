@@ -5,7 +5,10 @@ of one knob after the shaft took an unknown shape (paper section II-C, Algorithm
 
 * :mod:`.probe`: what the search steps and reads (a recorded replay, a live knob);
 * :mod:`.search`: the stepping, and the statistical decisions on the readings;
-* :mod:`.result`: the offset with its interval and the evidence for it.
+* :mod:`.result`: the offset with its interval and the evidence for it;
+* :mod:`.request`: what a detection is asked to do, checked before anything moves;
+* :mod:`.run`: the detection on every chosen knob of a replay or a live robot
+  (:func:`run_detect_shift`, what ``hyst detect-shift`` calls).
 
 One algorithm, several sources: the search talks to a probe, and replay and live run the same code.
 """
@@ -27,6 +30,7 @@ from .result import Evidence, ShiftResult
 # the device layer (which needs only the probe's sample) and `hyst --help` do not load numba
 _LAZY = {name: "search" for name in ("DEFAULT_MAX_TRAVEL", "Reference", "apply_shift", "default_max_travel",
                                      "detect_shift", "detect_shifts", "reference_of")}
+_LAZY.update({name: "request" for name in ("ProbeSource", "ShiftRequest", "select_knobs")}, run_detect_shift="run")
 
 
 def __getattr__(name: str) -> Any:
@@ -37,9 +41,9 @@ def __getattr__(name: str) -> Any:
     globals()[name] = value
     return value
 
-__all__ = ["DEFAULT_MAX_TRAVEL", "Evidence", "Probe", "ProbeSample", "Reference", "ReplayExhausted", "ReplayProbe",
-           "ShiftResult", "apply_shift", "default_max_travel", "detect_shift", "detect_shifts", "plot_shift",
-           "reference_of", "return_knob"]
+__all__ = ["DEFAULT_MAX_TRAVEL", "Evidence", "Probe", "ProbeSample", "ProbeSource", "Reference", "ReplayExhausted",
+           "ReplayProbe", "ShiftRequest", "ShiftResult", "apply_shift", "default_max_travel", "detect_shift",
+           "detect_shifts", "plot_shift", "reference_of", "return_knob", "run_detect_shift", "select_knobs"]
 
 
 def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "Model | None" = None,

@@ -31,21 +31,23 @@ and live run this same code over different probes (:mod:`.probe`, ``hystcli.devi
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+import os
+from dataclasses import dataclass, field, replace
 from statistics import NormalDist
 from typing import Any, Callable, Mapping
 
 import numpy as np
 
-from ..errors import HystError, ShiftDetectionError
+from ..errors import HystError, ParameterError, ShiftDetectionError
 from ..estimate import Estimate
-from ..io import Run
+from ..io import Run, read_run
 from ..model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
 from ..signal.reading import _classify
 from ..signal.result import orientation
 from .probe import ProbeSample, ReplayExhausted, ReplayProbe, return_knob
+from .request import ShiftRequest, select_knobs
 from .result import Evidence, ShiftResult
 
 __all__ = ["Reference", "reference_of", "detect_shift", "default_max_travel", "DEFAULT_MAX_TRAVEL"]
@@ -448,9 +450,10 @@ def _offset_interval(edge: _Edge, ref: Reference) -> tuple[float, float]:
     return off - below, off + above
 
 
-def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings = DEFAULT,
+def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings: Settings = DEFAULT,
                  eps_upper: float | None = None, step: float = 0.5, max_steps: int | None = None,
                  max_travel: float | None = None, direction: int | None = None, return_home: bool = True,
+                 false_alarm: float | None = None,
                  progress: Callable[[ProbeSample, float], None] | None = None) -> ShiftResult:
     """Find the shift of one knob's dead zone from its motor current (Algorithm 1).
 
@@ -458,12 +461,17 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     ----------
     model : Model
         The straight-shaft model, with the identification sweep's reading of the current.
-    probe : Probe or Run
+    probe : Probe, Run or path-like
         Steps the knob and reads the current (:class:`.probe.ReplayProbe`, a live device probe);
-        a recorded replay (:class:`hystcli.io.Run`) is read through a :class:`.probe.ReplayProbe`.
-    knob : int
+        a recorded replay (:class:`hystcli.io.Run`, or its CSV file) is read through a
+        :class:`.probe.ReplayProbe`.
+    knob : int, optional
+        Default: the probe's own knob; for a replay, the one knob of the model it records; else
+        the model's only knob.
     settings : Settings
         The level, the false-alarm rate, the widest offset interval returned.
+    false_alarm : float, optional
+        Replaces ``settings.false_alarm`` (a script need not build a :class:`Settings` for it).
     eps_upper : float, optional
         Contact slope (mA/deg); default the settings' contact factor times the sweep's loaded slope.
     step : float
@@ -483,9 +491,19 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
     ------
     ShiftDetectionError
         No edge within the limits, an offset known less well than the settings allow, no side
-        with a reference. Every error raised during the search has stopped the probe and returned
-        the knob first; its message says so.
+        with a reference, a search option out of range. Every error raised during the search has
+        stopped the probe and returned the knob first; its message says so.
+    ParameterError
+        No ``knob`` given and none to default to; ``false_alarm`` outside (0, 0.5).
+    ModelError
+        A knob the model does not have.
     """
+    if isinstance(probe, (str, os.PathLike)):
+        probe = read_run(probe)
+    if false_alarm is not None:
+        settings = ShiftRequest(false_alarm=false_alarm, settings=settings).options()["settings"]
+    if knob is None:
+        knob = _default_knob(model, probe)
     k = int(knob)
     if isinstance(probe, Run):
         probe = ReplayProbe(probe, k)
@@ -510,6 +528,20 @@ def detect_shift(model: Model, probe: Any, knob: int = 1, *, settings: Settings 
         if not returned:
             raise ShiftDetectionError(f"knob {k}: edge found at {edge.at:.2f} deg, but {note}")
     return _result(k, model.knob(k), edge, ref, search, returned, float(step))
+
+
+def _default_knob(model: Model, probe: Any) -> int:
+    """The knob a search without one means: the probe's, the replay's one knob, the model's only one."""
+    if isinstance(probe, Run):
+        knobs = select_knobs(model, None, probe)
+    elif getattr(probe, "knob", None) is not None:
+        return int(probe.knob)
+    else:
+        knobs = list(model.knobs)
+    if len(knobs) != 1:
+        where = "the replay records" if isinstance(probe, Run) else "the model has"
+        raise ParameterError("knob", f"{where} knobs {', '.join(map(str, knobs))}: say which to search")
+    return int(knobs[0])
 
 
 def _limits(model: Model, k: int, probe: Any, ref: Reference, step: float, max_travel: float | None,
@@ -576,7 +608,27 @@ def detect_shifts(model: Model, probes: Mapping[int, Any], **options: Any) -> di
     return {k: detect_shift(model, probes[k], k, **options) for k in sorted(probes)}
 
 
-def apply_shift(model: Model, results: Mapping[int, ShiftResult] | Any) -> Model:
-    """The model with each detected knob's ``offset`` set (absolute), others unchanged."""
+def apply_shift(model: Model, results: Mapping[int, ShiftResult] | Any, *, source: str | None = None,
+                sha256: str | None = None) -> Model:
+    """The model with each detected knob's ``offset`` set (absolute), others unchanged.
+
+    Parameters
+    ----------
+    model : Model
+    results : mapping of knob to ShiftResult, or iterable of ShiftResult
+    source : str, optional
+        Where the shift was found (a replay's file name, ``live:PORT``): kept in the model's
+        metadata as ``shift_source``, so a shifted model says what it was shifted by.
+    sha256 : str, optional
+        The replay file's SHA-256, kept as ``shift_sha256``.
+    """
     items = results.values() if isinstance(results, Mapping) else results
-    return model.with_offsets({r.knob: r.offset for r in items})
+    shifted = model.with_offsets({r.knob: r.offset for r in items})
+    if source is None and sha256 is None:
+        return shifted
+    meta = dict(shifted.meta)
+    if source is not None:
+        meta["shift_source"] = source
+    if sha256 is not None:
+        meta["shift_sha256"] = sha256
+    return replace(shifted, meta=meta)
