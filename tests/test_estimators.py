@@ -123,3 +123,18 @@ def test_the_identify_plot_file_is_the_figure_s_png(sweep, tmp_path):
     ident = hystcli.identify(sweep)
     plot_identification(sweep, ident, tmp_path / "fit.png")
     assert (tmp_path / "fit.png").read_bytes() == figure_bytes(ident.plot(sweep), "png")
+
+
+def test_evaluation_plot_is_the_figure_hyst_evaluate_saves(sweep):
+    from matplotlib.figure import Figure
+
+    from hystcli.metrics import evaluation_figure
+    from hystcli.report.figures import figure_bytes
+
+    model = hystcli.identify(sweep).model.with_offsets({1: 3.0})
+    reference = hystcli.read_run(ROOT / "sample_data" / "reference_periodic.csv")
+    runs = [hystcli.predict(model, hystcli.compensate(model, reference, ignore_shift=ignore).run)
+            for ignore in (True, False)]
+    fig = hystcli.evaluate(runs).plot(runs)
+    assert isinstance(fig, Figure) and len(fig.axes) == 2  # one (motion, shape, knob) column, two rows
+    assert evaluation_figure(runs, "svg") == figure_bytes(fig, "svg")
