@@ -92,10 +92,10 @@ _LAZY = {
 }
 
 __all__ = [
-    "Compensator", "DataError", "DeviceError", "Diagnoser", "EffectSpec", "Geometry", "HystError", "IdentificationError",
-    "Identifier", "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop", "Settings", "Shape",
-    "ShiftDetectionError", "ShiftDetector", "compensate", "detect_shift", "diagnose", "evaluate", "identify", "load_model",
-    "predict", "read_run", "save_model", "write_run", "__version__",
+    "Compensator", "DataError", "DeviceError", "Diagnoser", "EffectSpec", "Geometry", "HystError",
+    "IdentificationError", "Identifier", "KnobModel", "LinkError", "Model", "ModelError", "Run", "SafetyStop",
+    "Settings", "Shape", "ShiftDetectionError", "ShiftDetector", "compensate", "detect_shift", "diagnose",
+    "evaluate", "identify", "load_model", "predict", "read_run", "save_model", "write_run", "__version__",
 ]
 
 

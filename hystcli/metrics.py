@@ -4,8 +4,8 @@ This module owns the metrics (section III of the paper), their grouping over run
 tables they make (plain data: columns and rows) and the pure-text formatters of those tables
 (JSON and a LaTeX tabular laid out like the paper's; the generic ones are
 :mod:`hystcli.report.table`'s; the figure like the paper's Figs. 6 and 7 is drawn by
-:mod:`hystcli.report.evaluation`, from the runs this module picks for it). It never prints and never imports typer or rich:
-``hystcli.cli.metrics_cmds`` prints what it returns.
+:mod:`hystcli.report.evaluation`, from the runs this module picks for it). It never prints and
+never imports typer or rich: ``hystcli.cli.metrics_cmds`` prints what it returns.
 
 Definitions (the paper's words, section III-A):
 
