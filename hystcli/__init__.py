@@ -19,6 +19,10 @@ The Python surface (docs/design.md section 9)::
     report = hystcli.evaluate(runs)           # -> Evaluation: .groups, .summary()
     diag = hystcli.diagnose(model, runs)      # -> Diagnosis: .model, .verdict, .summary()
 
+    est = hystcli.Identifier(level=0.9)       # the estimators as objects: settings in the constructor
+    ident = est.fit(sweep)                    # as hystcli.identify(sweep, settings=Settings(level=0.9))
+    est.get_params()                          # {"level": 0.9, ...}; also ShiftDetector, Diagnoser
+
 docs/library.md runs a whole session of these as a script.
 
 ``import hystcli`` loads only the error classes: every other name is imported on first use
@@ -39,7 +43,8 @@ imports neither typer, rich nor matplotlib.
 5. effects: the effect chain around the hysteresis;
 6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
    reports (tables, formats, figures), checks of a data set;
-7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit);
+7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit), and
+   the estimator objects around them (:mod:`hystcli.estimators`);
 8. device: the robot protocol, driver, probe, motions, tracking and emulator;
 9. studies: the twin, its calibrated catheters and the paper's experiment (:mod:`hystcli.sim`),
    batches of runs;
@@ -66,7 +71,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("effects",),
     ("compensation", "stream", "stream_stages", "stream_kernels", "safety", "metrics", "report", "inspection",
      "check"),
-    ("identification", "shift", "diagnosis"),
+    ("identification", "shift", "diagnosis", "estimators"),
     ("device",),
     ("sim", "batch"),
     ("cli", "__main__"),
@@ -83,13 +88,15 @@ _LAZY = {
     "EffectSpec": "model", "Geometry": "model", "KnobModel": "model", "Model": "model", "Shape": "model",
     "Settings": "settings", "identify": "identification", "detect_shift": "shift", "compensate": "compensation",
     "predict": "compensation", "evaluate": "metrics", "diagnose": "diagnosis",
+    "Identifier": "estimators", "ShiftDetector": "estimators", "Diagnoser": "estimators",
 }
 
 __all__ = [
-    "Compensator", "DataError", "DeviceError", "EffectSpec", "Geometry", "HystError", "IdentificationError",
-    "KnobModel", "LinkError", "Model", "ModelError", "ParameterError", "Run", "SafetyStop", "Settings", "Shape",
-    "ShiftDetectionError", "compensate", "detect_shift", "diagnose", "evaluate", "identify", "load_model",
-    "predict", "read_run", "save_model", "write_run", "__version__",
+    "Compensator", "DataError", "DeviceError", "Diagnoser", "EffectSpec", "Geometry", "HystError",
+    "IdentificationError", "Identifier", "KnobModel", "LinkError", "Model", "ModelError", "ParameterError", "Run",
+    "SafetyStop", "Settings", "Shape", "ShiftDetectionError", "ShiftDetector", "compensate", "detect_shift",
+    "diagnose", "evaluate", "identify", "load_model", "predict", "read_run", "save_model", "write_run",
+    "__version__",
 ]
 
 

@@ -3,9 +3,9 @@
 This module owns the metrics (section III of the paper), their grouping over run metadata, the
 tables they make (plain data: columns and rows) and the pure-text formatters of those tables
 (JSON and a LaTeX tabular laid out like the paper's; the generic ones are
-:mod:`hystcli.report.table`'s, the figure like the paper's Figs. 6 and 7 is
-:mod:`hystcli.report.evaluation`'s). It never prints and never imports typer or rich:
-``hystcli.cli.metrics_cmds`` prints what it returns.
+:mod:`hystcli.report.table`'s; the figure like the paper's Figs. 6 and 7 is drawn by
+:mod:`hystcli.report.evaluation`, from the runs this module picks for it). It never prints and
+never imports typer or rich: ``hystcli.cli.metrics_cmds`` prints what it returns.
 
 Definitions (the paper's words, section III-A):
 
@@ -273,6 +273,24 @@ class Evaluation:
         """The groups' table as text (what ``hyst evaluate`` prints), then the warnings."""
         return "\n".join([format_text(group_table(self))] + [f"warning: {w}" for w in self.warnings])
 
+    def plot(self, runs: Sequence[Run]):  # noqa: ANN201 - matplotlib.figure.Figure, imported only when drawn
+        """The paper's Figs. 6 and 7 for the runs evaluated: time and input against output.
+
+        Parameters
+        ----------
+        runs : sequence of Run
+            The runs given to :func:`evaluate_runs` (the result keeps their errors, not their
+            samples); one run per controller stands for each (motion, shape, knob) column.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            What ``hyst evaluate --plot`` saves (:func:`evaluation_figure`).
+        """
+        from .report.evaluation import evaluation_axes
+
+        return evaluation_axes(figure_columns(runs))
+
     def to_dict(self) -> dict:
         return {
             "format": "hyst-evaluation",
@@ -462,6 +480,48 @@ evaluate = evaluate_runs
 
 
 # --------------------------------------------------------------------------------------------
+# the figure: which run stands for which panel (the drawing is hystcli.report.evaluation's)
+# --------------------------------------------------------------------------------------------
+def figure_columns(runs: Sequence[Run]) -> list[tuple[tuple[str, str, int], list[tuple[str, str, Run]]]]:
+    """The figure's columns: one per (motion, shape, knob) present, each with one run per
+    controller (the first catheter and trial, as the paper shows "one catheter"), in the order of
+    the tables, each controller with its label."""
+    entries = []
+    for i, run in enumerate(runs):
+        source = run.source or f"<run {i + 1}>"
+        meta = {n: (_meta_value(run, n) or UNKNOWN) for n in _META_FIELDS}
+        for k in _evaluable_knobs(run, source, []):
+            entries.append((meta, k, run))
+    entries.sort(key=lambda e: (_rank("catheter", e[0]["catheter"]), _rank("trial", e[0]["trial"])))
+    columns: dict[tuple[str, str, int], dict[str, Run]] = {}
+    for meta, k, run in entries:
+        col = columns.setdefault((meta["motion"], meta["shape"], k), {})
+        col.setdefault(meta["controller"], run)
+    order = sorted(columns, key=lambda c: (_rank("motion", c[0]), _rank("shape", c[1]), c[2]))
+    if not order:
+        raise DataError("nothing to draw: no run with a tip column y1 or y2 and its reference")
+    return [(c, [(ctrl, CONTROLLER_LABELS.get(ctrl, ctrl), columns[c][ctrl])
+                 for ctrl in sorted(columns[c], key=lambda x: _rank("controller", x))]) for c in order]
+
+
+def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
+    """:meth:`Evaluation.plot`'s figure as file bytes in ``fmt`` (``png``, ``pdf`` or ``svg``),
+    the same bytes for the same runs (``hyst evaluate --plot``, the demo's figures).
+
+    Raises
+    ------
+    DataError
+        Another format; no run with a tip column and its reference.
+    """
+    from .report.evaluation import evaluation_axes
+    from .report.figures import PLOT_FORMATS, figure_bytes
+
+    if fmt not in PLOT_FORMATS:
+        raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
+    return figure_bytes(evaluation_axes(figure_columns(runs)), fmt)
+
+
+# --------------------------------------------------------------------------------------------
 # tables: plain data, then pure-text formatters
 # --------------------------------------------------------------------------------------------
 
@@ -615,7 +675,7 @@ def render(evaluation: Evaluation, fmt: str = "table", per_run: bool = False) ->
 
 __all__ = [
     "BASELINES", "DEFAULT_GROUP_BY", "Evaluation", "GROUP_FIELDS", "GroupResult",
-    "Improvement", "RunResult", "UNKNOWN", "evaluate", "evaluate_runs",
+    "Improvement", "RunResult", "UNKNOWN", "evaluate", "evaluate_runs", "evaluation_figure", "figure_columns",
     "format_json", "format_latex", "group_table",
     "improvement", "mean_std", "parse_group_by", "ptpe", "render", "rmse", "run_table",
 ]

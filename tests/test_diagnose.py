@@ -95,11 +95,16 @@ def test_effect_free_data_reports_no_effect_and_describes_the_residual():
 def test_the_figure_draws_small_shares_small():
     # effect-free runs: what the residual follows explains a few percent at most; on the figure's
     # 0-100 % axis such a bar stays a sliver, labelled with its value
-    from hystcli.diagnosis import diagnosis_axes
+    from matplotlib.figure import Figure
+
+    import hystcli
 
     runs = make_runs((), seed=2)
     d = diagnose(BASE, runs)
-    fig = diagnosis_axes(d, runs)
+    fig = d.plot(runs)
+    assert isinstance(fig, Figure) and len(fig.axes) == 4
+    # the estimator object holds diagnose's options and calls it: the same diagnosis
+    assert hystcli.Diagnoser().diagnose(BASE, runs) == d
     shares, speeds, follows = fig.axes[:3]
     assert shares.get_ylim() == speeds.get_ylim() == (0.0, 100.0)
     assert follows.get_xlim() == (0.0, 100.0)

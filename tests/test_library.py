@@ -30,11 +30,15 @@ def test_the_library_functions_are_top_level_names():
         assert getattr(hystcli, name) is getattr(importlib.import_module(module), name), name
 
 
-def _session_code() -> str:
+def _page_code() -> list[str]:
     text = (ROOT / "docs" / "library.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, re.S)
-    assert len(blocks) == 1, "docs/library.md holds one script"
-    return blocks[0]
+    assert len(blocks) == 2, "docs/library.md holds the session and the estimators' example"
+    return blocks
+
+
+def _session_code() -> str:
+    return _page_code()[0]
 
 
 def test_the_session_of_the_docs_runs_and_finds_the_shift(monkeypatch, capsys):
@@ -56,12 +60,28 @@ def test_the_session_of_the_docs_runs_and_finds_the_shift(monkeypatch, capsys):
     assert both.rmse_mean < 1e-6 < comp.rmse_mean
 
 
+def test_the_estimators_example_of_the_docs_runs(monkeypatch, capsys):
+    from matplotlib.figure import Figure
+
+    code = _page_code()[1]
+    monkeypatch.chdir(ROOT)
+    ns: dict = {}
+    exec(compile(code, "docs/library.md", "exec"), ns)  # noqa: S102 - the page's own script
+    out = capsys.readouterr().out
+    assert "0.9 Identifier(level=0.9)" in out and ns["ident"].summary() in out
+    assert ns["est"].get_params() == {**hystcli.Identifier().get_params(), "level": 0.9}
+    want = hystcli.identify(ns["sweep"], settings=hystcli.Settings(level=0.9))
+    assert ns["ident"].intervals == want.intervals
+    assert isinstance(ns["fig"], Figure) and ns["fig"].axes
+
+
 def _module_examples(name: str) -> doctest.TestResults:
     module = sys.modules.get(name) or importlib.import_module(name)
     return doctest.testmod(module, optionflags=doctest.ELLIPSIS, report=False)
 
 
-@pytest.mark.parametrize("name", ["hystcli.stream", "hystcli.io.files", "hystcli.cli.app", "hystcli.shift.request"])
+@pytest.mark.parametrize("name", ["hystcli.stream", "hystcli.io.files", "hystcli.cli.app", "hystcli.shift.request",
+                                  "hystcli.estimators"])
 def test_the_docstring_examples_run(name):
     importlib.import_module(name)
     res = _module_examples(name)

@@ -68,7 +68,7 @@ def evaluate(
     loaded = [require_shape(load_run(p, mapping, quiet=quiet)) for p in runs]
     evaluation = metrics.evaluate_runs(loaded, group_by=metrics.parse_group_by(group_by))
     text = metrics.render(evaluation, fmt.value, per_run=per_run)
-    from ..report.evaluation import evaluation_figure
+    from ..metrics import evaluation_figure
 
     png = evaluation_figure(loaded, plot.suffix.lower().lstrip(".")) if plot is not None else None
 

@@ -38,7 +38,7 @@ from .tip import PARAMS as TIP_PARAMS
 from .tip import TipFit, fit_tip, systematic_misfit
 
 __all__ = ["Identification", "KnobFit", "SweepCheck", "MIN_SAMPLES", "check_sweep", "current_levels",
-           "find_reversals", "identify", "plot_identification"]
+           "find_reversals", "identification_figure", "identify", "plot_identification"]
 
 
 @dataclass(frozen=True)
@@ -112,6 +112,22 @@ class Identification:
     @property
     def intervals(self) -> dict[int, dict[str, Estimate]]:
         return {k: f.estimates for k, f in self.fits.items()}
+
+    def plot(self, run: Run):  # noqa: ANN201 - matplotlib.figure.Figure, imported only when drawn
+        """The sweep's measured loop and current against the identified model, per knob.
+
+        Parameters
+        ----------
+        run : Run
+            The sweep this was identified from (the result keeps the fit, not the record).
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            What ``hyst identify --plot`` saves (:func:`identification_figure`); save it with
+            ``fig.savefig(path)``.
+        """
+        return identification_figure(run, self)
 
 
 def _knob_list(run: Run, knobs, use_tip: bool = False) -> list[int]:  # noqa: ANN001
@@ -394,17 +410,33 @@ def current_levels(run: Run, knob: int, model: KnobModel, settings: Settings = D
 # figure
 # --------------------------------------------------------------------------------------------
 def plot_identification(run: Run, result: Identification, path) -> None:  # noqa: ANN001
-    """Draw each knob's measured loop against the identified model (like Fig. 4 of the paper).
+    """:func:`identification_figure` written atomically to ``path`` as PNG (``hyst identify --plot``)."""
+    from ..io import atomic_write
+    from ..report.figures import figure_bytes
+
+    data = figure_bytes(identification_figure(run, result), "png")
+    atomic_write(path, lambda f: f.write(data))
+
+
+def identification_figure(run: Run, result: Identification):  # noqa: ANN201 - matplotlib.figure.Figure
+    """Each knob's measured loop against the identified model (like Fig. 4 of the paper).
 
     Left: tip angle against knob angle, measured (when the run has it) and predicted; right:
     motor current against knob angle (when the run has it), with where the current shows each
-    tendon taken up. The identified dead-zone edges are marked on both. Written atomically as PNG
-    with matplotlib's ``Figure`` API.
+    tendon taken up. The identified dead-zone edges are marked on both. matplotlib's ``Figure``
+    API: no global backend is switched, nothing is shown.
+
+    Parameters
+    ----------
+    run : Run
+        The sweep ``result`` was identified from.
+    result : Identification
+
+    Returns
+    -------
+    matplotlib.figure.Figure
     """
     from matplotlib.figure import Figure
-
-    from ..io import atomic_write
-    from ..report.figures import figure_bytes
 
     ks = sorted(result.fits)
     fig = Figure(figsize=(11, 4.2 * len(ks)))
@@ -443,5 +475,4 @@ def plot_identification(run: Run, result: Identification, path) -> None:  # noqa
             a.grid(alpha=0.3)
             a.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
-    data = figure_bytes(fig, "png")
-    atomic_write(path, lambda f: f.write(data))
+    return fig

@@ -1,15 +1,16 @@
 """The evaluation's figure: time and input against output per controller, like the paper's Figs. 6
-and 7 (``hyst evaluate --plot``, the demo's figures)."""
+and 7 (``hyst evaluate --plot``, the demo's figures, ``Evaluation.plot``).
+
+The drawing only: which run stands for which panel is the evaluation's choice
+(:func:`hystcli.metrics.figure_columns`), so this module does not import the metrics and the
+metrics' result can draw itself."""
 from __future__ import annotations
 
 from typing import Sequence
 
 import numpy as np
 
-from .. import metrics as M
-from ..errors import DataError
 from ..io import Run
-from .figures import PLOT_FORMATS, figure_bytes
 
 #: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
 CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}
@@ -39,44 +40,34 @@ def _thin(*series: np.ndarray) -> tuple[np.ndarray, ...]:
     return tuple(np.asarray(s)[idx] for s in series)
 
 
-def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
-    """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as file bytes.
+Columns = Sequence[tuple[tuple[str, str, int], Sequence[tuple[str, str, Run]]]]
+"""The figure's columns: ((motion, shape, knob), ((controller, label, run), ...)), in order."""
 
-    One column per (motion, shape, knob) present; in it, for each controller, one run (the first
-    catheter and trial, as the paper shows "one catheter"); top: ``r`` (ground truth, black) and
-    each controller's ``y`` against time; bottom: ``y`` against the input ``r``, with the ideal
-    ``y = r`` in black. Colours are the paper's: none blue, comp red, comp+shift green.
+
+def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figure
+    """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as a matplotlib
+    ``Figure`` (:meth:`hystcli.metrics.Evaluation.plot`; the file is
+    :func:`hystcli.metrics.evaluation_figure`'s).
+
+    One column per (motion, shape, knob); in it, for each controller, one run; top: ``r`` (ground
+    truth, black) and each controller's ``y`` against time; bottom: ``y`` against the input
+    ``r``, with the ideal ``y = r`` in black. Colours are the paper's: none blue, comp red,
+    comp+shift green.
 
     Parameters
     ----------
-    runs : sequence of Run
-        As for :func:`hystcli.metrics.evaluate_runs`.
-    fmt : str
-        ``png``, ``pdf`` or ``svg``.
+    columns : sequence of ((motion, shape, knob), sequence of (controller, label, run))
+        The panels' columns in order, each with its controllers in order (which run stands for
+        which cell is the evaluation's choice, :func:`hystcli.metrics.figure_columns`).
 
     Returns
     -------
-    bytes
+    matplotlib.figure.Figure
     """
-    if fmt not in PLOT_FORMATS:
-        raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    entries = []
-    for i, run in enumerate(runs):
-        source = run.source or f"<run {i + 1}>"
-        meta = {n: (M._meta_value(run, n) or M.UNKNOWN) for n in M._META_FIELDS}
-        for k in M._evaluable_knobs(run, source, []):
-            entries.append((meta, k, run))
-    entries.sort(key=lambda e: (M._rank("catheter", e[0]["catheter"]), M._rank("trial", e[0]["trial"])))
-    columns: dict[tuple[str, str, int], dict[str, Run]] = {}
-    for meta, k, run in entries:
-        col = columns.setdefault((meta["motion"], meta["shape"], k), {})
-        col.setdefault(meta["controller"], run)
-    order = sorted(columns, key=lambda c: (M._rank("motion", c[0]), M._rank("shape", c[1]), c[2]))
-    if not order:
-        raise DataError("nothing to draw: no run with a tip column y1 or y2 and its reference")
+    order = [c for c, _ in columns]
     motions = {c[0] for c in order}
 
     fig = Figure(figsize=(4.2 * len(order), 7.0), dpi=100)
@@ -85,8 +76,9 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     extra: dict[str, str] = {}
     for j, ckey in enumerate(order):
         motion, shape, k = ckey
-        by_ctrl = columns[ckey]
-        ctrls = sorted(by_ctrl, key=lambda c: M._rank("controller", c))
+        by_ctrl = {c: run for c, _, run in columns[j][1]}
+        labels = {c: label for c, label, _ in columns[j][1]}
+        ctrls = list(by_ctrl)
         top, bottom = axes[0][j], axes[1][j]
         ref = by_ctrl[ctrls[0]]
         # ground truth drawn last and dashed, so a controller that tracks it perfectly hides nothing
@@ -99,7 +91,7 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
         for c in ctrls:
             run = by_ctrl[c]
             colour = _controller_colour(c, extra)
-            label = M.CONTROLLER_LABELS.get(c, c)
+            label = labels[c]
             top.plot(*_thin(run.t, run[f"y{k}"]), color=colour, lw=1.4, label=label)
             bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), color=colour, lw=1.4, label=label)
         title = f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else "")
@@ -125,9 +117,9 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     # just to measure its labels (a second of the demo)
     fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.15 / width, bottom=(0.75 + 0.2 * rows) / height,
                         top=1.0 - 0.3 / height, wspace=0.85 / 4.2 / 0.8, hspace=0.65 / 3.0)
-    return figure_bytes(fig, fmt)
+    return fig
 
 
 
 
-__all__ = ["CONTROLLER_COLOURS", "evaluation_figure"]
+__all__ = ["CONTROLLER_COLOURS", "evaluation_axes"]

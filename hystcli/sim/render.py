@@ -9,7 +9,7 @@ from typing import Mapping, Sequence
 from .. import metrics
 from ..errors import DataError
 from ..io import all_or_none
-from ..report.evaluation import evaluation_figure
+from ..metrics import evaluation_figure
 from ..report.table import TEXT_WIDTH, Table, format_markdown, format_text
 from .experiment import Cell, ExperimentResult
 from .scenarios import CONTROLLERS, PAPER_CELLS, PAPER_IMPROVEMENT, SCENARIOS, TOLERANCE
