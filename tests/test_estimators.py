@@ -143,3 +143,19 @@ def test_evaluation_plot_is_the_figure_hyst_evaluate_saves(sweep):
     fig = hystcli.evaluate(runs).plot(runs)
     assert isinstance(fig, Figure) and len(fig.axes) == 2  # one (motion, shape, knob) column, two rows
     assert evaluation_figure(runs, "svg") == figure_bytes(fig, "svg")
+
+
+def test_the_shift_plot_is_the_figure_detect_shift_saves(sweep, tmp_path):
+    # ShiftResult.plot() is the one panel `hyst detect-shift --plot` writes for that knob
+    from matplotlib.figure import Figure
+
+    from hystcli.report.figures import figure_bytes
+    from hystcli.shift import plot_shift
+
+    model = hystcli.identify(sweep).model
+    result = hystcli.detect_shift(model, REPLAY, knob=1)
+    fig = result.plot(model)
+    assert isinstance(fig, Figure) and len(fig.axes) == 1
+    assert "offset" in fig.axes[0].get_title() and fig.axes[0].get_xlabel() == "knob 1 angle (deg)"
+    plot_shift([result], tmp_path / "shift.png", model=model)
+    assert (tmp_path / "shift.png").read_bytes() == figure_bytes(fig, "png")

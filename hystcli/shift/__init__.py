@@ -22,7 +22,6 @@ import numpy as np
 import importlib
 from typing import Any
 
-from ..errors import ShiftDetectionError
 from .probe import Probe, ProbeSample, ReplayExhausted, ReplayProbe, return_knob
 from .result import Evidence, ShiftResult
 
@@ -54,9 +53,7 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "
     Parameters
     ----------
     results : sequence of ShiftResult
-        One panel per knob: the search's steps (current vs angle), the edge it found (dot), the
-        shifted dead zone :math:`[\\tilde D_{neg}, \\tilde D_{pos}]` (shaded) and, with
-        ``model``, the straight-shaft edges (dotted).
+        One panel per knob (:func:`.figure.shift_figure`).
     path : path-like
         The PNG file (written through a temporary file and a rename).
     background : mapping of knob to (q, current), optional
@@ -64,45 +61,9 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "
     inputs : iterable of path-like
         The command's inputs, never overwritten.
     """
-    from matplotlib.figure import Figure
-
     from ..io import atomic_write
     from ..report.figures import figure_bytes
+    from .figure import shift_figure
 
-    results = list(results)
-    if not results:
-        raise ShiftDetectionError("nothing to plot: no knob was searched")
-    fig = Figure(figsize=(5.5 * len(results), 4.0))
-    axes = fig.subplots(1, len(results), squeeze=False)
-    for ax, r in zip(axes[0], results):
-        if background and r.knob in background:
-            bq, bc = background[r.knob]
-            ax.plot(bq, bc, color="0.8", lw=0.8, label="record")
-        tq = np.array([p[0] for p in r.trace])
-        tc = np.array([p[1] for p in r.trace])
-        ax.plot(tq, tc, ".-", color="tab:blue", ms=3, lw=0.8, label="search steps")
-        ax.axvspan(r.d_neg, r.d_pos, color="tab:green", alpha=0.12,
-                   label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
-        if model is not None and r.knob in model.knobs:
-            km = model.knob(r.knob)
-            for d in (km.d_neg, km.d_pos):
-                ax.axvline(d, color="0.4", ls=":", lw=1)
-        edge_c = float(np.interp(r.edge_found_at, *_sorted(tq, tc))) if tq.size else 0.0
-        ax.plot([r.edge_found_at], [edge_c], "o", color="tab:red", ms=8,
-                label=f"edge {r.edge} at {r.edge_found_at:.2f} deg")
-        if r.evidence is not None:
-            ax.axvspan(r.evidence.edge_lo, r.evidence.edge_hi, color="tab:red", alpha=0.15)
-        for cq in r.contacts:
-            ax.axvline(cq, color="tab:orange", ls="--", lw=1)
-        ax.set_xlabel(f"knob {r.knob} angle (deg)")
-        ax.set_ylabel("motor current (mA)")
-        ax.set_title(f"knob {r.knob}: offset {r.offset:+.2f} deg [{r.offset_lo:+.2f}, {r.offset_hi:+.2f}]")
-        ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
-    data = figure_bytes(fig, "png")
+    data = figure_bytes(shift_figure(results, model, background), "png")
     atomic_write(path, lambda f: f.write(data), inputs=inputs)
-
-
-def _sorted(q: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    order = np.argsort(q, kind="stable")
-    return q[order], c[order]

@@ -117,6 +117,25 @@ class ShiftResult:
                 f"from the {self.edge} edge at {self.edge_found_at:.2f} deg ({self.steps} steps, "
                 f"{self.travel:.1f} deg of travel)")
 
+    def plot(self, model=None, background=None):  # noqa: ANN001, ANN201 - matplotlib Figure, loaded when drawn
+        """The search's current against knob angle with the edge it found (the paper's Fig. 5b).
+
+        Parameters
+        ----------
+        model : Model, optional
+            The straight-shaft model, whose edges are drawn dotted.
+        background : tuple of numpy.ndarray, optional
+            ``(q, current)`` of a replay's whole record, drawn faintly behind the steps.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+            What ``hyst detect-shift --plot`` saves for this knob.
+        """
+        from .figure import shift_figure
+
+        return shift_figure([self], model, None if background is None else {self.knob: background})
+
     def to_dict(self, trace: bool = False) -> dict:
         """Plain JSON-ready dict (the trace only when asked; NaN slopes as null)."""
         out = {k: getattr(self, k) for k in ("knob", "offset", "offset_lo", "offset_hi", "d_pos", "d_neg", "edge",
