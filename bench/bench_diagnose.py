@@ -19,8 +19,9 @@ from hystcli import compensation
 from hystcli.sim import twin
 from hystcli.sim.calibration import calibrated_catheter
 from hystcli.diagnosis import diagnose
-from hystcli.io import Run
-from hystcli.model import Model, Shape
+from hystcli.core.run import Run
+from hystcli.core.model import Model
+from hystcli.core.params import Shape
 
 SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=0")
 

@@ -8,11 +8,11 @@ import time
 
 import numpy as np
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import live as live_twin
 from hystcli.sim import twin
-from hystcli.io import Run
-from hystcli.model import Model
+from hystcli.core.run import Run
+from hystcli.core.model import Model
 
 CAT = twin.get_catheter("example-a")
 

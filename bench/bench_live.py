@@ -47,7 +47,8 @@ from hystcli.sim.calibration import calibrated_catheter
 from hystcli.device import (DEFAULT_DWELL, DEFAULT_MEAN, Device, DeviceProbe, decode_frame,
                             encode_frame, open_probe)
 from hystcli.device.emulator import DeviceEmulator
-from hystcli.model import KnobIdentification, Model, Shape
+from hystcli.core.model import Model
+from hystcli.core.params import KnobIdentification, Shape
 from hystcli.shift import detect_shift
 from hystcli.sim.live import LiveTwin
 

@@ -11,7 +11,7 @@ import time
 
 import numpy as np
 
-from hystcli.model import KnobModel
+from hystcli.core.params import KnobModel
 
 
 def best_rate(fn, arg, n, repeat):

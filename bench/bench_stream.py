@@ -18,9 +18,9 @@ import time
 import numpy as np
 
 import hystcli
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
-from hystcli.model import Model
+from hystcli.core.model import Model
 
 CAT = twin.get_catheter("example-a")
 

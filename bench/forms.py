@@ -13,7 +13,7 @@ from __future__ import annotations
 import argparse
 import time
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.diagnosis import diagnose
 

@@ -1,7 +1,7 @@
 """Withheld-effect study (issue 11, item 4): does `hyst diagnose` name an effect it was not built on?
 
 The catheters come from the independent zoo (:mod:`plants.zoo.catheters`): two-knob plants with
-unmodelled effects written from the physics by an author who never read ``hystcli.effects``, in
+unmodelled effects written from the physics by an author who never read ``hystcli.core.effects``, in
 forms of their own (36 of them). Only the zoo's public API is used here: ``suite_specs``,
 ``make_case``, ``parse_run``-free run CSV text, and the effect *names* of a case for scoring.
 
@@ -100,7 +100,7 @@ def run_case(seed: int, effects: tuple) -> dict:
     chosen = [s.name for s in d.selected]
     before = after = 0.0
     n = 0
-    from hystcli.effects import predict
+    from hystcli.core.effects import predict
     invalid = 0
     for r in test:
         pb = predict(model, r, effects=())

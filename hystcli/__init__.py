@@ -36,22 +36,22 @@ layer or the ones below, never from a layer above, and no two modules import eac
 circle (tests/test_layers.py reads every import with ``ast`` and fails on either). The core
 imports neither typer, rich nor matplotlib.
 
-1. foundation: errors, estimates, settings, names, filters, thread pools;
+1. foundation: errors, estimates, settings, names, filters, thread pools, the motion limits of a
+   knob trajectory (:mod:`hystcli.safety`);
 2. signal: conditioning and reading the motor current;
-3. core: the hysteresis kernel and the model (:mod:`hystcli.core`, :mod:`hystcli.model`);
+3. core (:mod:`hystcli.core`): the one hysteresis kernel, each knob's model and the shaft's shape
+   (:mod:`hystcli.core.params`), the run a model works on (:mod:`hystcli.core.run`), the effects and
+   their chain (:mod:`hystcli.core.effects`), and the catheter's model with its prediction and
+   inverse (:mod:`hystcli.core.model`);
 4. io: runs and models in files, the import of foreign logs (:mod:`hystcli.io`);
-5. effects: the effect chain around the hysteresis;
-6. use: prediction and compensation (batch and streaming), motion limits, the evaluation's metrics,
+5. use: compensation within a motor's limits, streaming compensation, the evaluation's metrics,
    reports (tables, formats, figures), checks of a data set;
-7. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit), and
+6. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit), and
    the estimator objects around them (:mod:`hystcli.estimators`);
-8. device: the robot protocol, driver, probe, motions, tracking and emulator;
-9. studies: the twin, its calibrated catheters and the paper's experiment (:mod:`hystcli.sim`),
+7. device: the robot protocol, driver, probe, motions, tracking and emulator;
+8. studies: the twin, its calibrated catheters and the paper's experiment (:mod:`hystcli.sim`),
    batches of runs;
-10. cli: the command line (options, one library call, rendering).
-
-One arrow goes up, on purpose: ``Model.predict`` and ``Model.compensate`` (the design's
-``m.predict(run)``) import :mod:`hystcli.compensation` when called; :data:`LATE_IMPORTS` names it.
+9. cli: the command line (options, one library call, rendering).
 """
 from __future__ import annotations
 
@@ -64,13 +64,11 @@ from .errors import (DataError, DeviceError, HystError, IdentificationError, Lin
 __version__ = "0.1.0"
 
 LAYERS: tuple[tuple[str, ...], ...] = (
-    ("errors", "estimate", "settings", "names", "filters", "threads"),
+    ("errors", "estimate", "settings", "names", "filters", "threads", "safety"),
     ("signal",),
-    ("core", "model"),
+    ("core",),
     ("io",),
-    ("effects",),
-    ("compensation", "stream", "stream_stages", "stream_kernels", "safety", "metrics", "report", "inspection",
-     "check"),
+    ("compensation", "stream", "stream_stages", "stream_kernels", "metrics", "report", "inspection", "check"),
     ("identification", "shift", "diagnosis", "estimators"),
     ("device",),
     ("sim", "batch"),
@@ -79,15 +77,13 @@ LAYERS: tuple[tuple[str, ...], ...] = (
 """The layers of the package, lowest first: each names the modules and subpackages directly under
 ``hystcli`` that belong to it (the module notes)."""
 
-LATE_IMPORTS: frozenset[tuple[str, str]] = frozenset({("model", "compensation")})
-"""(importer, imported) pairs allowed to point up a layer, and only from inside a function."""
-
 # public name -> submodule that defines it (imported when the name is first asked for)
 _LAZY = {
-    "Compensator": "stream", "Run": "io", "load_model": "io", "read_run": "io", "save_model": "io", "write_run": "io",
-    "EffectSpec": "model", "Geometry": "model", "KnobModel": "model", "Model": "model", "Shape": "model",
-    "Settings": "settings", "identify": "identification", "detect_shift": "shift", "compensate": "compensation",
-    "predict": "compensation", "evaluate": "metrics", "diagnose": "diagnosis",
+    "Compensator": "stream", "Run": "core.run", "load_model": "io", "read_run": "io", "save_model": "io",
+    "write_run": "io", "EffectSpec": "core.params", "Geometry": "core.params", "KnobModel": "core.params",
+    "Model": "core.model", "Shape": "core.params", "Settings": "settings", "identify": "identification",
+    "detect_shift": "shift", "compensate": "compensation", "predict": "core.model", "evaluate": "metrics",
+    "diagnose": "diagnosis",
     "Identifier": "estimators", "ShiftDetector": "estimators", "Diagnoser": "estimators",
 }
 

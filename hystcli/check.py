@@ -40,10 +40,11 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .core.run import Run
 from .errors import DataError, HystError
-from .io import KNOWN_COLUMNS, MAX_ABS_VALUE, Run
-from .settings import CURRENT_SIGNS
+from .io import KNOWN_COLUMNS, MAX_ABS_VALUE
 from .io.runs import _parse_meta_line as _meta_line
+from .settings import CURRENT_SIGNS
 
 ERROR = "error"
 WARNING = "warning"
@@ -279,7 +280,7 @@ def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) ->
 
 
 def _meta_problems(meta: Mapping[str, str]) -> list[Problem]:
-    from .model import Shape
+    from .core.params import Shape
 
     shape = meta.get("shape")
     if shape is None or not str(shape).strip():

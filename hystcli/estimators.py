@@ -21,8 +21,8 @@ from typing import Any, Callable, ClassVar, Sequence
 
 from .diagnosis import Diagnosis, diagnose
 from .identification import Identification, identify
-from .io import Run
-from .model import Model
+from .core.run import Run
+from .core.model import Model
 from .settings import DEFAULT, Settings
 from .shift import ShiftResult
 from .shift.search import detect_shift

@@ -17,7 +17,8 @@ from typing import Any, Sequence
 from .errors import DataError
 from .report.figures import PLOT_FORMATS, figure_bytes
 from .report.table import Table
-from .model import PARAM_NAMES, KnobModel, Model
+from .core.model import Model
+from .core.params import KnobModel, PARAM_NAMES
 
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")
 """Edges a knob's parameters imply (deg): the far edges of the dead zone, the shifted edges."""

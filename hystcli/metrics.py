@@ -34,8 +34,8 @@ from typing import Iterable, Sequence
 import numpy as np
 
 from .errors import DataError, HystError
-from .io import Run
-from .model import Shape
+from .core.run import Run
+from .core.params import Shape
 from .report.table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
                            format_text, latex_escape)
 
@@ -148,7 +148,7 @@ class RunResult:
     knob : int
     controller, shape, motion, trial, catheter : str
         Run metadata (``"unknown"`` when absent); ``shape`` in the canonical form of
-        :class:`~hystcli.model.Shape` when it parses.
+        :class:`~hystcli.core.params.Shape` when it parses.
     ptpe : float
         ``max(e) - min(e)``, deg.
     rmse : float

@@ -264,7 +264,7 @@ def check_motion(run: Any, limits: Limits = Limits(), *, knobs: Any = None,
 
     Parameters
     ----------
-    run : hystcli.io.Run
+    run : hystcli.core.run.Run
         Columns ``t`` and ``q1`` and/or ``q2``.
     limits : Limits
     knobs : iterable of int, optional
@@ -611,7 +611,7 @@ class Planned:
 
     Attributes
     ----------
-    run : hystcli.io.Run
+    run : hystcli.core.run.Run
         The commands to send: those asked for, rate-limited where needed with ``speed="limit"``.
     check : MotionCheck
         The commands asked for against the limits (what ``strict`` refuses, ``fast`` sends).
@@ -640,7 +640,7 @@ def plan_motion(run: Any, limits: Limits = Limits(), speed: str = "strict", *, n
 
     Parameters
     ----------
-    run : hystcli.io.Run
+    run : hystcli.core.run.Run
         Columns ``t`` and ``q1`` and/or ``q2``.
     limits : Limits
     speed : str

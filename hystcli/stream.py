@@ -1,10 +1,10 @@
 """Streaming compensation: the model's inverse chain one reference sample at a time, for a
 robot's own control loop (docs/design.md section 9, ``hystcli.Compensator``).
 
-:class:`Compensator` runs the same chain as ``hyst compensate`` (:func:`hystcli.effects.inverse`):
+:class:`Compensator` runs the same chain as ``hyst compensate`` (:func:`hystcli.core.effects.inverse`):
 the inverse stages of the model's effects from the sensor back to the input, with the hysteresis
 inverse of docs/design.md section 3 in the middle, each stage keeping its own state between samples
-(:meth:`hystcli.effects.EffectType.stepper`). Fed the samples of a reference file one by one it
+(:meth:`hystcli.core.effects.EffectType.stepper`). Fed the samples of a reference file one by one it
 returns the commands ``hyst compensate`` writes for that file (to float rounding: ``exp`` and
 ``atanh`` may differ from the compiled kernels' by an ulp).
 
@@ -55,10 +55,11 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from .core import kernel as core_kernel
-from .effects import chain
-from .effects.registry import as_effects
+from .core.effects import chain
+from .core.effects.registry import as_effects
 from .errors import DataError, ModelError
-from .model import Model, Shape
+from .core.model import Model
+from .core.params import Shape
 from .safety import CatchUp, Limits, RateLimiter
 from .stream_stages import _Bend, _CompiledCoupling, _Hysteresis, _Knob
 

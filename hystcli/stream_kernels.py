@@ -17,11 +17,11 @@ COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, ma
            forms), ``D = other`` or ``|other|`` (``other``: the
            other knob's command, or its bend for the magnitude
            forms); the identity when the other knob is not given
-UNLAG      :class:`hystcli.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
+UNLAG      :class:`hystcli.core.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
                                                                   u, z, tp, dt, e, c
 HYST       ``_Hysteresis.step`` of hystcli/stream_stages.py       the knob's 8 kernel args, n,
            (edges moved by the deadzone couplings)                (gain, magnitude) x n / y, x
-LAG        :class:`hystcli.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
+LAG        :class:`hystcli.core.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
            other knob's coupling sees of a command)
 BEND       ``_Bend.step`` of hystcli/stream_stages.py: the        the knob's 8 kernel args / y
            knob's base model forward, its bend as the other

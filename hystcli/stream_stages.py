@@ -8,9 +8,9 @@ from typing import Any, Sequence
 import numpy as np
 
 from .core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
-from .effects import chain, kernels
-from .effects.base import Effect, Signals
-from .model import KnobModel
+from .core.effects import chain, kernels
+from .core.effects.base import Effect, Signals
+from .core.params import KnobModel
 
 
 class _Hysteresis:
@@ -118,7 +118,7 @@ class _Hysteresis:
 class _Bend:
     """The forward hysteresis of docs/design.md section 3 one sample at a time (:mod:`hystcli.core.kernel`'s
     envelopes and clamp on plain floats): a knob's bend as its base model predicts it, what the other knob's
-    magnitude coupling reads (:mod:`hystcli.effects.coupling`)."""
+    magnitude coupling reads (:mod:`hystcli.core.effects.coupling`)."""
 
     __slots__ = ("kn", "y")
 
@@ -210,8 +210,8 @@ class _CompiledCoupling:
     @staticmethod
     def _flatten(s: Any, table: list) -> bool:
         from . import stream_kernels as K
-        from .effects import kernels
-        from .effects.coupling import _CouplingStep
+        from .core.effects import kernels
+        from .core.effects.coupling import _CouplingStep
 
         if isinstance(s, kernels.Cascade):
             return all(_CompiledCoupling._flatten(x, table) for x in s.steps)

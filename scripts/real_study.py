@@ -9,7 +9,7 @@ encoders' readings at t = 0 (the input the same in every file of a session, the 
 backlash: not re-zeroed, so offsets between files are physical), the mean output offset after
 the first 2 s against the file's resistive load (slope in deg per % and R^2), the loop width at
 mid-travel and the drift. The load moves the whole loop linearly (the cable stretches under the
-torque: effect ``stretch`` of hystcli.effects, driven by the run's ``condition`` metadata, which
+torque: effect ``stretch`` of hystcli.core.effects, driven by the run's ``condition`` metadata, which
 the mrdlab import sets to the load level); the width and the drift do not follow the load.
 
 Conditions (Must-show 1). Every file has its own (frequency, load, pitch), so a "condition" is a
@@ -78,11 +78,13 @@ import numpy as np
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-from hystcli import effects as E  # noqa: E402
-from hystcli.compensation import predict_tip  # noqa: E402
+from hystcli.core import effects as E  # noqa: E402
+from hystcli.core.model import predict_tip  # noqa: E402
 from hystcli.identification import identify  # noqa: E402
-from hystcli.io import Run, atomic_write_text, read_run  # noqa: E402
-from hystcli.model import EffectSpec, Model  # noqa: E402
+from hystcli.core.run import Run  # noqa: E402
+from hystcli.io import atomic_write_text, read_run
+from hystcli.core.model import Model  # noqa: E402
+from hystcli.core.params import EffectSpec
 
 REAL = ROOT / "sample_data" / "real"
 PITCHES = dict(zip(range(1, 6), (60, 30, 0, -30, -60)))
@@ -285,7 +287,7 @@ def diagnose_condition(cond: Condition) -> Diag:
 def valid_at(model: Model, runs) -> bool:
     """Whether the model's effects keep its knob valid at every run's condition and shape."""
     from hystcli.errors import ModelError
-    from hystcli.model import Shape
+    from hystcli.core.params import Shape
 
     for r in runs:
         try:
@@ -469,7 +471,7 @@ def render(anat, rows, totals, series_totals, per_file, diags, with_c: bool) -> 
           + (", of both signs between sessions" if min(ws) < 0 < max(ws) else "")
           + f", no consistent widening. Not drift: the residual drifts by at most {drift:.2f} deg "
           "over a file, at every load. The model term this calls for is an output offset "
-          "proportional to the load: effect `stretch` (hystcli.effects: both envelopes move by "
+          "proportional to the load: effect `stretch` (hystcli.core.effects: both envelopes move by "
           "compliance x (condition - reference); its driver is the run's `condition` metadata, "
           "which the mrdlab import sets to the load level).", ""]
     L += ["The same offsets against the load the cable actually carried: the file's mean back-end "

@@ -31,7 +31,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "scripts"))
 
-from hystcli.compensation import predict_tip  # noqa: E402
+from hystcli.core.model import predict_tip  # noqa: E402
 from hystcli.identification import identify  # noqa: E402
 from hystcli.io import read_run  # noqa: E402
 from real_study import BE_NM_PER_COUNT, REAL, SETTLE_S, back_end_torque_counts  # noqa: E402

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from hystcli.diagnosis import attribution as A
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.diagnosis import search as S
 from hystcli.diagnosis import diagnose
 from hystcli.diagnosis.select import _folds

@@ -10,7 +10,8 @@ from hystcli import check
 from hystcli.io import importer
 from hystcli.check import ERROR, WARNING, Problem, check_file, check_run
 from hystcli.errors import DataError
-from hystcli.io import Run, read_run, write_run
+from hystcli.core.run import Run
+from hystcli.io import read_run, write_run
 
 SWEEP = Path(__file__).resolve().parents[1] / "sample_data" / "ice-a" / "sweep_knob1.csv"
 

@@ -17,8 +17,10 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli.cli import app
-from hystcli.io import Run, model_to_dict, read_run, save_model, write_run
-from hystcli.model import Geometry, KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.io import model_to_dict, read_run, save_model, write_run
+from hystcli.core.model import Model
+from hystcli.core.params import Geometry, KnobModel
 
 runner = CliRunner()
 ROOT = Path(__file__).resolve().parents[1]

@@ -14,7 +14,8 @@ import numpy as np
 import pytest
 
 from hystcli.io import read_run, save_model
-from hystcli.model import KnobModel, Model
+from hystcli.core.model import Model
+from hystcli.core.params import KnobModel
 
 from test_cli_model import files, invoke  # noqa: F401 - the fixture: a shifted 2-knob model, a 0.2 Hz sine
 

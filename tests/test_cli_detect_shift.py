@@ -15,7 +15,8 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli.cli import app
-from hystcli.io import Run, load_model, model_to_dict, read_run, write_run
+from hystcli.core.run import Run
+from hystcli.io import load_model, model_to_dict, read_run, write_run
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_data" / "ice-a"
 runner = CliRunner()

@@ -23,8 +23,9 @@ from hystcli.sim.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device import Device
 from hystcli.device.emulator import Fault, serve
-from hystcli.io import Run, read_run, write_run
-from hystcli.model import Shape
+from hystcli.core.run import Run
+from hystcli.io import read_run, write_run
+from hystcli.core.params import Shape
 from hystcli.device.robot import Interrupted, play_trajectory
 from hystcli.safety import LimitExceeded, Limits
 from hystcli.sim.live import LiveTwin

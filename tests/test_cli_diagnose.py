@@ -10,11 +10,13 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli import compensation
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.cli import app
-from hystcli.io import Run, load_model, read_run, save_model, write_run
-from hystcli.model import Model, Shape
+from hystcli.core.run import Run
+from hystcli.io import load_model, read_run, save_model, write_run
+from hystcli.core.model import Model
+from hystcli.core.params import Shape
 
 runner = CliRunner()
 CAT = twin.get_catheter("example-a")

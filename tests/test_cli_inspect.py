@@ -10,7 +10,8 @@ from typer.testing import CliRunner
 from hystcli.cli import app
 from hystcli.estimate import Estimate
 from hystcli.io import save_model
-from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
+from hystcli.core.model import Model
+from hystcli.core.params import EffectSpec, Geometry, KnobIdentification, KnobModel
 
 runner = CliRunner()
 EXAMPLE = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)

@@ -13,8 +13,10 @@ from typer.testing import CliRunner
 
 from hystcli.sim import twin
 from hystcli.cli import app
-from hystcli.io import Run, load_model, model_to_dict, read_run, save_model, write_run
-from hystcli.model import Geometry, KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.io import load_model, model_to_dict, read_run, save_model, write_run
+from hystcli.core.model import Model
+from hystcli.core.params import Geometry, KnobModel
 
 runner = CliRunner()
 

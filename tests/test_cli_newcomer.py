@@ -13,7 +13,8 @@ from typer.testing import CliRunner
 
 from hystcli.cli import app
 from hystcli.cli.app import HELP_PANELS, SUMMARY_WIDTH
-from hystcli.io import Run, load_model, read_run, write_run
+from hystcli.core.run import Run
+from hystcli.io import load_model, read_run, write_run
 
 ROOT = Path(__file__).resolve().parents[1]
 SWEEP = ROOT / "sample_data" / "ice-a" / "sweep_knob1.csv"

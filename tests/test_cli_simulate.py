@@ -8,7 +8,8 @@ import pytest
 from typer.testing import CliRunner
 
 from hystcli.cli import app
-from hystcli.io import Run, read_run, write_run
+from hystcli.core.run import Run
+from hystcli.io import read_run, write_run
 
 runner = CliRunner()
 

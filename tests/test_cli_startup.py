@@ -10,7 +10,7 @@ import sys
 
 import pytest
 
-HEAVY = ("scipy", "pandas", "numba", "matplotlib", "rich", "hystcli.sim.twin", "hystcli.effects",
+HEAVY = ("scipy", "pandas", "numba", "matplotlib", "rich", "hystcli.sim.twin", "hystcli.core.effects",
          "hystcli.identification", "hystcli.diagnosis", "hystcli.sim.experiment")
 
 

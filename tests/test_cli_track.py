@@ -16,8 +16,10 @@ from typer.testing import CliRunner
 from hystcli.sim.calibration import calibrated_catheter
 from hystcli.cli import app
 from hystcli.device.emulator import Fault, serve
-from hystcli.io import Run, read_run, save_model, write_run
-from hystcli.model import Model, Shape
+from hystcli.core.run import Run
+from hystcli.io import read_run, save_model, write_run
+from hystcli.core.model import Model
+from hystcli.core.params import Shape
 from hystcli.sim.live import LiveTwin
 from hystcli.sim.twin import periodic, simulate
 from simrobot import TIMEOUT, interrupt_after, start_sim_robot, stop

@@ -11,13 +11,14 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hystcli import compensation
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.diagnosis import MIN_GAIN_PCT, PHASES, diagnose
 from hystcli.diagnosis.where import _phase
 from hystcli.errors import DataError, ModelError
-from hystcli.io import Run
-from hystcli.model import KnobModel, Model, Shape
+from hystcli.core.run import Run
+from hystcli.core.model import Model
+from hystcli.core.params import KnobModel, Shape
 
 CAT = twin.get_catheter("example-a")
 BASE = Model(CAT.knobs, CAT.geometry, meta={"catheter": "example-a"})

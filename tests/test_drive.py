@@ -1,7 +1,7 @@
 """Where a delay sits (hystcli.diagnosis.drive): the sweep's motor current against its tip.
 
 The catheters are the independent zoo's (plants.zoo.catheters, written without reading
-hystcli.effects or hystcli.diagnosis.drive); the case seeds are the withheld suite's design seeds (92xxx).
+hystcli.core.effects or hystcli.diagnosis.drive); the case seeds are the withheld suite's design seeds (92xxx).
 """
 from __future__ import annotations
 

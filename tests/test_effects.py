@@ -9,11 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.errors import DataError, ModelError
-from hystcli.io import Run
-from hystcli.model import EffectSpec, KnobModel, Model, Shape
+from hystcli.core.run import Run
+from hystcli.core.model import Model
+from hystcli.core.params import EffectSpec, KnobModel, Shape
 
 CAT = twin.get_catheter("example-a")
 K1 = CAT.knobs[1]  # d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2

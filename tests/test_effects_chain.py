@@ -1,4 +1,4 @@
-"""The effect chain (hystcli/effects/chain.py): every form of every effect is the base model bit for
+"""The effect chain (hystcli/core/effects/chain.py): every form of every effect is the base model bit for
 bit when off, its inverse undoes its forward, the chain gives the same samples in pieces as in one
 call (the streaming path), and Model.predict / Model.compensate are what the CLI writes."""
 from __future__ import annotations
@@ -12,11 +12,13 @@ from hypothesis import strategies as st
 from typer.testing import CliRunner
 
 import hystcli
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.cli import app
-from hystcli.io import Run, read_run, save_model, write_run
-from hystcli.model import Model, Shape
+from hystcli.core.run import Run
+from hystcli.io import read_run, save_model, write_run
+from hystcli.core.model import Model
+from hystcli.core.params import Shape
 
 CAT = twin.get_catheter("example-a")
 T = np.arange(0, 30.0, 0.01)

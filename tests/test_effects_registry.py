@@ -1,4 +1,4 @@
-"""The effect registry (hystcli/effects/registry.py): forms by name in files, on the command line
+"""The effect registry (hystcli/core/effects/registry.py): forms by name in files, on the command line
 and in run metadata; version 1 model files stay valid; every form's search grid sits in its bounds."""
 from __future__ import annotations
 
@@ -9,11 +9,12 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.errors import ModelError
 from hystcli.io import load_model, save_model
-from hystcli.model import EffectSpec, Model
+from hystcli.core.model import Model
+from hystcli.core.params import EffectSpec
 
 CAT = twin.get_catheter("example-a")
 FORMS = [(n, f.name) for n, et in E.EFFECTS.items() for f in et.forms]

@@ -11,12 +11,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import hystcli
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
-from hystcli.effects import kernels
-from hystcli.effects.chain import ChainState, tip_chain
-from hystcli.io import Run
-from hystcli.model import KnobModel, Model
+from hystcli.core.effects import kernels
+from hystcli.core.effects.chain import ChainState, tip_chain
+from hystcli.core.run import Run
+from hystcli.core.model import Model
+from hystcli.core.params import KnobModel
 
 KN = KnobModel(d_pos=5.0, d_neg=-5.0, b_pos=6.0, b_neg=6.0, omega=1.45, h_pos=1.0, h_neg=-1.0)
 NONE = np.empty(0)

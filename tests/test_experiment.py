@@ -13,7 +13,7 @@ from hystcli.sim import render
 from hystcli.sim import scenarios as sc
 from hystcli.sim.calibration import CALIBRATED_NAMES, DEFAULT_EFFECTS, calibrated_catheter
 from hystcli.errors import DataError
-from hystcli.model import Shape
+from hystcli.core.params import Shape
 
 ROOT = Path(__file__).resolve().parent.parent
 SAMPLE = ROOT / "sample_data"

@@ -22,8 +22,9 @@ from hystcli.sim import twin
 from hystcli.cli import app
 from hystcli.errors import DataError, IdentificationError
 from hystcli.identification import check_sweep, find_reversals, identify, plot_identification
-from hystcli.io import Run, load_model, parse_run, read_run, save_model, write_run
-from hystcli.model import PAPER_OMEGA, Geometry, KnobModel
+from hystcli.core.run import Run
+from hystcli.io import load_model, parse_run, read_run, save_model, write_run
+from hystcli.core.params import Geometry, KnobModel, PAPER_OMEGA
 from hystcli.settings import DEFAULT
 from plants.zoo import plants
 
@@ -56,7 +57,7 @@ def example_run(lo: float, hi: float, cycles: float = 2.0, seed: int = 3) -> Run
 
 
 def truth_loop(params: dict, q: np.ndarray, y0: float) -> np.ndarray:
-    """The tip a loop predicts, by the independent zoo's clamp recursion (not hystcli.model)."""
+    """The tip a loop predicts, by the independent zoo's clamp recursion (not hystcli.core)."""
     return plants.KnobTruth(**params).forward(q, y0)
 
 

@@ -15,9 +15,11 @@ from hypothesis import strategies as st
 
 from hystcli.errors import DataError, ModelError
 from hystcli.estimate import Estimate
-from hystcli.io import (MAX_ABS_VALUE, Run, dumps_model, format_run, load_model, model_from_dict, model_to_dict,
-                        parse_run, read_run, save_model, write_run)
-from hystcli.model import EffectSpec, Geometry, KnobIdentification, KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.io import (MAX_ABS_VALUE, dumps_model, format_run, load_model, model_from_dict, model_to_dict, parse_run,
+                        read_run, save_model, write_run)
+from hystcli.core.model import Model
+from hystcli.core.params import EffectSpec, Geometry, KnobIdentification, KnobModel
 
 GOOD = "# catheter: ice-a\n# shape: alpha=90,theta=0\n# lab_note: kept\nt,q1,y1\n0,0,0\n0.1,1.5,0.2\n0.2,3,0.4\n"
 

@@ -11,7 +11,7 @@ import pytest
 import hystcli
 
 PACKAGE = Path(hystcli.__file__).resolve().parent
-CORE = ("core", "model", "effects")
+CORE = ("core",)
 
 
 def _modules() -> dict[str, Path]:
@@ -109,10 +109,6 @@ def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     return out
 
 
-def _allowed_late(src: str, dst: str, late: bool) -> bool:
-    return late and (_top(src), _top(dst)) in hystcli.LATE_IMPORTS
-
-
 def test_every_module_is_in_one_layer():
     tops = {_top(m) for m in _modules()} - {""}
     listed = [n for layer in hystcli.LAYERS for n in layer]
@@ -123,15 +119,13 @@ def test_every_module_is_in_one_layer():
 def test_no_module_imports_a_layer_above_its_own():
     upward = sorted(f"{src} -> {dst}{' (in a function)' if late else ''}"
                     for src, edges in _graph().items() if _top(src)
-                    for dst, late in edges if _top(dst) and _layer(dst) > _layer(src)
-                    and not _allowed_late(src, dst, late))
+                    for dst, late in edges if _top(dst) and _layer(dst) > _layer(src))
     assert not upward, "imports against the layers of hystcli.LAYERS:\n" + "\n".join(upward)
 
 
 def test_the_import_graph_has_no_circle():
-    graph = {src: {dst for dst, late in edges if not _allowed_late(src, dst, late)}
-             for src, edges in _graph().items()}
-    assert not _cycles(graph)
+    graph = {src: {dst for dst, _ in edges} for src, edges in _graph().items()}
+    assert not _cycles(graph), _cycles(graph)
 
 
 def test_the_package_itself_imports_only_the_errors():

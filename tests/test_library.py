@@ -14,7 +14,7 @@ import hystcli
 
 ROOT = Path(__file__).resolve().parents[1]
 FUNCTIONS = {"identify": "hystcli.identification", "detect_shift": "hystcli.shift.search",
-             "compensate": "hystcli.compensation", "predict": "hystcli.compensation",
+             "compensate": "hystcli.compensation", "predict": "hystcli.core.model",
              "evaluate": "hystcli.metrics", "diagnose": "hystcli.diagnosis"}
 
 

@@ -21,7 +21,8 @@ from hystcli.cli import app
 from hystcli.device import Device
 from hystcli.estimate import Estimate
 from hystcli.io import load_model, save_model
-from hystcli.model import KnobIdentification, Model
+from hystcli.core.model import Model
+from hystcli.core.params import KnobIdentification
 from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - test_rotate_shift imports them from here
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot --catheter ice-a` serves

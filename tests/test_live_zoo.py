@@ -19,7 +19,8 @@ from hystcli.device import open_probe
 from hystcli.device.emulator import serve
 from hystcli.errors import ShiftDetectionError
 from hystcli.identification import identify
-from hystcli.io import Run, load_model, parse_run, save_model
+from hystcli.core.run import Run
+from hystcli.io import load_model, parse_run, save_model
 from hystcli.shift import detect_shift
 from plants.zoo import plants
 from simrobot import TIMEOUT, sim_robot

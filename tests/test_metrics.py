@@ -16,7 +16,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import DataError
-from hystcli.io import Run
+from hystcli.core.run import Run
 from hystcli.metrics import (Evaluation, evaluate_runs, evaluation_figure, format_json, format_latex, group_table,
                              improvement, mean_std, parse_group_by, ptpe, render, rmse, run_table)
 from hystcli.report.table import format_csv, format_markdown, format_text

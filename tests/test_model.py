@@ -1,4 +1,4 @@
-"""Tests of hystcli.model: the eight lines, the inverse, validation, shape and rotation."""
+"""Tests of the model (hystcli.core): the eight lines, the inverse, validation, shape and rotation."""
 from __future__ import annotations
 
 import math
@@ -10,7 +10,8 @@ from hypothesis import strategies as st
 
 from hystcli.errors import ModelError
 from hystcli.core import kernel
-from hystcli.model import Geometry, KnobModel, Model, Shape, rotate_offsets
+from hystcli.core.model import Model
+from hystcli.core.params import Geometry, KnobModel, Shape, rotate_offsets
 
 # docs/design.md section 6's example knob.
 EXAMPLE = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)
@@ -286,8 +287,8 @@ def test_compiled_kernels_agree_with_the_plain_python_ones(knob, seed, y0):
 def test_a_model_whose_backlash_its_sweep_left_unfixed_refuses_to_predict_or_compensate():
     from hystcli.diagnosis import diagnose
     from hystcli.estimate import Estimate
-    from hystcli.io import Run
-    from hystcli.model import KnobIdentification
+    from hystcli.core.run import Run
+    from hystcli.core.params import KnobIdentification
     from hystcli.stream import Compensator
 
     # a current-only identification whose current unloads at once after each reversal keeps

@@ -7,12 +7,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hystcli.compensation import predict_tip
+from hystcli.core.model import predict_tip
 from hystcli.diagnosis import diagnose
 from hystcli.identification import identify
 from hystcli.io.importer import ImportOptions, convert, get_preset
-from hystcli.io import Run
-from hystcli.model import EffectSpec
+from hystcli.core.run import Run
+from hystcli.core.params import EffectSpec
 
 EXCERPT = Path(__file__).parent / "data" / "mrdlab" / "load_freq" / "41_first6000.TXT.gz"
 

@@ -6,11 +6,12 @@ import math
 import numpy as np
 import pytest
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.diagnosis import refit as R
 from hystcli.identification import identify
-from hystcli.io import Run
-from hystcli.model import KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.core.model import Model
+from hystcli.core.params import KnobModel
 
 TRUE = KnobModel(d_pos=8.0, d_neg=-7.0, b_pos=5.0, b_neg=4.5, omega=1.45, h_pos=-3.0, h_neg=3.5, offset=0.0)
 

@@ -36,7 +36,8 @@ import pytest
 
 from hystcli.errors import HystError
 from hystcli.identification import identify
-from hystcli.io import Run, parse_run
+from hystcli.core.run import Run
+from hystcli.io import parse_run
 from hystcli.shift import ReplayProbe, detect_shift
 
 ROWS_FILE = Path(__file__).resolve().parent / "data" / "regressions.csv"

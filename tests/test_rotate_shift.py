@@ -16,7 +16,7 @@ import pytest
 
 from hystcli.cli import app
 from hystcli.io import load_model
-from hystcli.model import Shape
+from hystcli.core.params import Shape
 from test_live_detect import CAT, detect, model_path, runner, start_sim_robot, stop  # noqa: F401
 
 SHAPE = "alpha=60,theta=45"

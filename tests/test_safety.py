@@ -13,7 +13,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from hystcli.errors import DataError, SafetyStop
-from hystcli.io import Run
+from hystcli.core.run import Run
 from hystcli.safety import (DEFAULT_MAX_SPEED, DEFAULT_TRAVEL, LimitExceeded, Limits, RateLimiter,
                             check_motion, check_target, knob_motion, plan_motion, rate_limit,
                             require_within)

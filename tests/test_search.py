@@ -7,10 +7,10 @@ import math
 import numpy as np
 import pytest
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.diagnosis import search as S
 from hystcli.sim import twin
-from hystcli.model import Shape
+from hystcli.core.params import Shape
 from test_diagnose import BASE, CAT, T, make_runs
 
 RUNS = make_runs([E.make_effect("creep", fraction=0.2, tau=2.0)], seed=5, two_dof=2)

@@ -15,8 +15,10 @@ import pytest
 from hystcli.errors import DataError, LinkError, ShiftDetectionError
 from hystcli.estimate import Estimate
 from hystcli.identification import identify
-from hystcli.io import Run, read_run
-from hystcli.model import KnobIdentification, KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.io import read_run
+from hystcli.core.model import Model
+from hystcli.core.params import KnobIdentification, KnobModel
 from hystcli.shift import (DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
                            apply_shift, default_max_travel, detect_shift, plot_shift, reference_of)
 

@@ -15,8 +15,10 @@ import hystcli
 from hystcli.device import LiveProbes
 from hystcli.errors import DataError, ModelError, ParameterError
 from hystcli.identification import identify
-from hystcli.io import Run, read_run
-from hystcli.model import KnobModel, Model
+from hystcli.core.run import Run
+from hystcli.io import read_run
+from hystcli.core.model import Model
+from hystcli.core.params import KnobModel
 from hystcli.shift import ShiftRequest, apply_shift, detect_shift, run_detect_shift, select_knobs
 
 SAMPLES = Path(__file__).resolve().parents[1] / "sample_data" / "ice-a"

@@ -14,13 +14,15 @@ from typer.testing import CliRunner
 
 import hystcli
 import hystcli.safety
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.cli import app
-from hystcli.compensation import compensate, predict_tip
+from hystcli.compensation import compensate
+from hystcli.core.model import predict_tip
 from hystcli.errors import DataError, ModelError
-from hystcli.io import Run, read_run, save_model, write_run
-from hystcli.model import Model
+from hystcli.core.run import Run
+from hystcli.io import read_run, save_model, write_run
+from hystcli.core.model import Model
 
 CAT = twin.get_catheter("example-a")
 REFS = {name: read_run(f"sample_data/reference_{name}.csv") for name in ("periodic", "nonperiodic")}

@@ -7,10 +7,10 @@ import numpy as np
 import pytest
 
 import hystcli
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import twin
 from hystcli.io import read_run
-from hystcli.model import Model
+from hystcli.core.model import Model
 
 CAT = twin.get_catheter("example-a")
 REF = read_run("sample_data/reference_nonperiodic.csv").with_meta(shape="alpha=45,theta=30")

@@ -7,13 +7,13 @@ import math
 import numpy as np
 import pytest
 
-from hystcli import effects as E
+from hystcli.core import effects as E
 from hystcli.sim import live as live_twin
 from hystcli.sim import twin
 from hystcli.errors import DataError, ModelError
 from hystcli.filters import lowpass
-from hystcli.io import Run
-from hystcli.model import Shape
+from hystcli.core.run import Run
+from hystcli.core.params import Shape
 
 CAT = twin.get_catheter("example-a")
 

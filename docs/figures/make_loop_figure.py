@@ -1,6 +1,6 @@
 """Draw the hysteresis loop of one knob with its parameters marked: docs/figures/loop.svg.
 
-The loop is the model itself (:class:`hystcli.model.KnobModel`: the envelopes and the clamp
+The loop is the model itself (:class:`hystcli.core.params.KnobModel`: the envelopes and the clamp
 recursion of the Method page) driven through one full sweep, so the figure cannot drift from the
 equations. The parameters are round numbers close to what ``hyst identify`` reads from the
 sample sweep. Run from the repository root; the same command writes the same bytes::
@@ -14,7 +14,7 @@ from pathlib import Path
 
 import numpy as np
 
-from hystcli.model import KnobModel
+from hystcli.core.params import KnobModel
 
 OUT = Path(__file__).with_name("loop.svg")
 

@@ -370,7 +370,7 @@ def effects_option(values: Optional[List[str]]) -> tuple | None:
     One rule for ``simulate`` and ``sim-robot``, so both given the same options run the same
     catheter.
     """
-    from ..effects import parse_effect
+    from ..core.effects import parse_effect
 
     if not values:
         return None

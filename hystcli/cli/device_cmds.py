@@ -15,10 +15,10 @@ from typing import Annotated, Any, List, Optional
 import typer
 
 from .. import io
-from ..sim.calibration import CALIBRATED_NAMES, calibrated_catheter
+from ..core.params import Shape
 from ..errors import DataError, HystError
-from ..model import Shape
 from ..safety import DEFAULT_MAX_SPEED, DEFAULT_MOVE_SPEED, DEFAULT_TRAVEL
+from ..sim.calibration import CALIBRATED_NAMES, calibrated_catheter
 from .app import (BaudOpt, ColumnsOpt, EffectOpt, FormatOpt, KnobsAliasOpt, OutOpt, OutputFormat, QuietOpt,
                   columns_mapping, command, echo_json, echo_table, effects_option, fail, info, load_run, one_of,
                   parse_knobs, stderr_is_tty, warn)
@@ -82,7 +82,7 @@ def sim_robot_cmd(
     and mean. The catheter and its effects are those of `hyst simulate` given the same
     --catheter and --effect.
     """
-    from ..effects import format_effects
+    from ..core.effects import format_effects
     from ..device.emulator import Fault, serve
     from ..sim.live import LiveTwin
 
@@ -177,11 +177,12 @@ def sweep_cmd(
     a straight shaft: play it on the robot with `hyst play` and identify the model from the
     recording with `hyst identify`.
     """
+    from ..core.run import Run
     from ..sim.twin import sweep
 
     t, q = sweep(amplitude=amplitude, cycles=cycles, peak_speed=peak_speed, fs=fs)
-    run = io.Run({"t": t, f"q{knob}": q}, {"motion": "sweep", "controller": "none", "knob": str(knob),
-                                            "shape": "straight"})
+    run = Run({"t": t, f"q{knob}": q}, {"motion": "sweep", "controller": "none", "knob": str(knob),
+                                         "shape": "straight"})
     io.write_run(output, run)
     info(f"wrote {output}: knob {knob}, +-{amplitude:g} deg, {cycles:g} cycles at up to "
          f"{peak_speed:g} deg/s, {len(run)} samples ({t[-1]:.1f} s)", quiet)

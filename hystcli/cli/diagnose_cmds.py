@@ -51,7 +51,7 @@ def diagnose_cmd(
     from .. import io
     from ..check import require_shape
     from ..diagnosis import diagnose, diagnosis_figure
-    from ..effects import EFFECTS
+    from ..core.effects import EFFECTS
 
     only_formats(fmt, "diagnose", OutputFormat.table, OutputFormat.json)
     distinct_outputs(**{"--output": output, "--model-out": model_out, "--plot": plot})

@@ -7,10 +7,10 @@ from typing import Annotated, Optional
 
 import typer
 
+from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .app import (ColumnsOpt, CurrentSign, FormatOpt, ModelOpt, OutOpt, OutputFormat, PlotOpt, QuietOpt, SeedOpt, about,
                   columns_mapping, command, distinct_outputs, echo_json, echo_table, info, load_run, one_of,
                   option_errors, prints, usage_error, warn)
-from ..safety import DEFAULT_MAX_SPEED, DEFAULT_TRAVEL
 from .robot_opts import (AllowFastOpt, InverseMaxSpeedOpt, MaxAccelOpt, StrictSpeedOpt, TravelLimitOpt, limit_hint,
                          limits, speed_mode)
 
@@ -52,7 +52,7 @@ def identify_cmd(
     from dataclasses import replace
 
     from .. import io
-    from ..model import Geometry
+    from ..core.params import Geometry
     from ..settings import Settings
 
     del seed  # identification draws nothing at random
@@ -239,21 +239,21 @@ def predict_cmd(
     per knob the predicted range and, with a measurement, the RMSE and PTPE of prediction minus
     measurement.
     """
-    from .. import compensation, io
+    from .. import io
 
     io.check_not_input(output, [run_path, model_path])
     mapping = columns_mapping(columns)
     model = io.load_model(model_path)
     with about(run_path):
         run = load_run(run_path, mapping, quiet=quiet)
-        predicted = compensation.predict(model, run)
+        predicted = model.predict(run)
     io.write_run(output, predicted, inputs=[run_path, model_path])
     if prints(fmt, quiet):
         echo_table(_prediction_table(predicted), fmt)
     info(f"wrote {output}", quiet)
 
 
-def _prediction_table(predicted):  # noqa: ANN001, ANN202 - io.Run -> report.table.Table
+def _prediction_table(predicted):  # noqa: ANN001, ANN202 - core.run.Run -> report.table.Table
     import numpy as np
 
     from ..metrics import ptpe, rmse

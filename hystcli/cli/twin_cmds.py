@@ -7,8 +7,8 @@ from typing import Annotated, List, Optional
 
 import typer
 
-from ..sim.calibration import CALIBRATED_NAMES
 from ..names import MOTIONS
+from ..sim.calibration import CALIBRATED_NAMES
 from .app import (ColumnsOpt, EffectOpt, FormatOpt, KnobsAliasOpt, OutOpt, OutputFormat, QuietOpt, SeedOpt, about,
                   columns_mapping, command, echo_json, echo_table, effects_option, info, load_run, one_of,
                   option_errors, parse_knobs, prints, usage_error)
@@ -54,7 +54,7 @@ def simulate_cmd(
     """
     from .. import io
     from ..sim.calibration import calibrated_catheter
-    from ..model import Shape
+    from ..core.params import Shape
     from ..sim.twin import simulate_motion
 
     # every option is checked before the commands file is read or the twin runs

@@ -7,8 +7,8 @@ recursion: the output is held until an envelope at the present knob angle pushes
 
 and its exact inverse puts the knob on the ascending envelope when the desired output rises and on
 the descending one when it falls. This module is the only place that writes either: prediction
-(:class:`hystcli.model.KnobModel`), the effect chain's moving-edge kernels
-(:mod:`hystcli.effects.kernels`), the streaming compensator (:mod:`hystcli.stream`), the tip fit
+(:class:`hystcli.core.params.KnobModel`), the effect chain's moving-edge kernels
+(:mod:`hystcli.core.effects.kernels`), the streaming compensator (:mod:`hystcli.stream`), the tip fit
 (:mod:`hystcli.identification.tip`) and the twin all call the functions below.
 
 Every function is compiled with numba (``fastmath=False``: IEEE operations in source order), and
@@ -19,7 +19,7 @@ envelope arguments as *gaps* (``u - edge``) computed in their own order: moving 
 as ``u - dhat_pos - a`` and as ``u - (dhat_pos + a)`` round differently, and each caller keeps the
 numbers it has always had.
 
-Importing this module imports numba but compiles nothing; :mod:`hystcli.model` imports it on the
+Importing this module imports numba but compiles nothing; :mod:`hystcli.core.params` imports it on the
 first prediction, so ``import hystcli`` stays light.
 """
 from __future__ import annotations

@@ -350,7 +350,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     ----------
     device : Device
         An open device (handshake done).
-    trajectory : hystcli.io.Run
+    trajectory : hystcli.core.run.Run
         Columns ``t`` and ``q1`` and/or ``q2`` (e.g. the output of ``hyst compensate``); its
         ``r<k>`` columns and metadata are carried over.
     paced : bool
@@ -373,7 +373,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
 
     Returns
     -------
-    hystcli.io.Run
+    hystcli.core.run.Run
         Columns ``t`` (the file's), ``q<k>`` (commands), ``c<k>`` (mA), ``y<k>`` (deg, when the
         device has a tracker), ``r<k>`` when the trajectory has them; the trajectory's metadata
         plus the device identity and ``play_timing``, ``play_max_lag_s``, ``play_peak_speed``,
@@ -390,7 +390,7 @@ def play_trajectory(device: Device, trajectory: Any, *, paced: bool = True,
     Interrupted
         Ctrl-C while playing (likewise).
     """
-    from ..io import Run
+    from ..core.run import Run
 
     info = device.info or device.hello()
     plan = check_trajectory(device, trajectory, limits, speed=speed)

@@ -28,9 +28,9 @@ from typing import Any, Callable, Iterable, Iterator, Mapping
 
 import numpy as np
 
+from ..core.model import Model
+from ..core.run import Run
 from ..errors import DataError, SafetyStop
-from ..io import Run
-from ..model import Model
 from ..safety import DEFAULT_MOVE_SPEED, LimitExceeded, Limits, check_speed_mode
 
 

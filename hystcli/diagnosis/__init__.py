@@ -21,10 +21,10 @@ WHICH, before any fit
     ("Unexplained: the residual follows ...").
 
 WHICH, fitted
-    Every effect of :data:`hystcli.effects.EFFECTS` is a candidate family (one driven by a
+    Every effect of :data:`hystcli.core.effects.EFFECTS` is a candidate family (one driven by a
     stated ``condition`` only when a run states one). Nothing here knows one effect from another:
     each family's forms bring their grids, bounds and the runs they act on
-    (:mod:`hystcli.effects.base`), and :mod:`.search` makes the table of every run's SSE
+    (:mod:`hystcli.core.effects.base`), and :mod:`.search` makes the table of every run's SSE
     at every grid point of every form, so a fit on any set of training runs is a weighted column
     sum and a pick (no refit per fold): by BIC among forms, only where enough runs see a form,
     between the grid's neighbours along a one-parameter form's axis. Whole runs are held out:

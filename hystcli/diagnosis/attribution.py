@@ -33,7 +33,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import effects as E
+from ..core import effects as E
 from .search import Prep
 
 REGRESSORS = ("other knob angle", "other knob magnitude", "knob velocity", "time since reversal",
@@ -96,7 +96,7 @@ def columns(p: Prep, k: int, effects: Sequence[E.Effect]) -> tuple[np.ndarray, n
     groups: dict[str, np.ndarray] = {}
     o = p.q.get(3 - k)
     if o is not None:
-        # the bend the magnitude coupling reads (hystcli/effects/coupling.py): the other knob's
+        # the bend the magnitude coupling reads (hystcli/core/effects/coupling.py): the other knob's
         # travel from its offset where its model is missing
         bend = p.bend(3 - k)
         a = np.abs(o - p.offsets.get(3 - k, 0.0)) if bend is None else np.abs(bend)

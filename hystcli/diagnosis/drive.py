@@ -19,7 +19,7 @@ current there. On the design seeds' lag and latency cases (suite seeds 0, 91, 92
 their delay.
 
 :func:`contradicts` is the diagnosis' use: a candidate form that puts all of its delay on one
-side (:meth:`hystcli.effects.base.EffectType.drive_share`) is contradicted when the current's
+side (:meth:`hystcli.core.effects.base.EffectType.drive_share`) is contradicted when the current's
 reading sits much closer to the other side's prediction, and the delay is large enough for the
 edges to show it.
 """
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..io import Run
-from ..model import Model
+from ..core.model import Model
+from ..core.run import Run
 from ..signal.reading import read_current
 
 MIN_SPEED = 2.0

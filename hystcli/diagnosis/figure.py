@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from typing import Sequence
 
-from ..io import Run
+from ..core.run import Run
 from .result import Diagnosis
 
 

@@ -8,12 +8,12 @@ from typing import Callable, Sequence
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .. import effects as E
-from ..effects.base import EffectType
+from ..core import effects as E
+from ..core.effects.base import EffectType
+from ..core.model import Model
+from ..core.run import Run
 from ..errors import DataError, ModelError
-from ..io import Run
 from ..metrics import ptpe as _ptpe
-from ..model import Model
 from . import attribution as A
 from . import drive as D
 from . import refit as R
@@ -40,7 +40,7 @@ def diagnose(model: Model, runs: Sequence[Run], holdout: str | None = None,
         ``key=value``: test on the runs whose metadata ``key`` equals ``value``, train on the
         others. Default: leave one run out.
     candidates : sequence of str, optional
-        Effect names to try (default: every effect of :data:`hystcli.effects.EFFECTS`; those
+        Effect names to try (default: every effect of :data:`hystcli.core.effects.EFFECTS`; those
         whose driver is ``condition``, e.g. stretch, only when a run has ``condition`` metadata).
     max_effects : int
         Most effects the greedy selection adds.

@@ -39,10 +39,11 @@ import numpy as np
 from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
-from ..effects.base import Effect, Signals
+from ..core.effects.base import Effect, Signals
+from ..core.model import Model
+from ..core.params import KnobModel
+from ..core.run import Run
 from ..identification import tip as T
-from ..io import Run
-from ..model import KnobModel, Model
 
 SWEEP_HZ = 50.0
 """The sweep is block-averaged to this rate for the refits (a lag of 0.02 s resolution)."""
@@ -120,7 +121,7 @@ def unwiden(sweep: Sweep, model: Model, widen: float) -> dict[int, KnobModel]:
     below zero) leaves a zero width. Closed form, not a refinement: the widening moves only the
     plateau ends, which the identification read directly.
     """
-    from ..effects import kernels
+    from ..core.effects import kernels
 
     out = {k: model.knob(k) for k in model.knobs}
     for k, q in sweep.q.items():

@@ -9,9 +9,9 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .. import effects as E
-from ..io import Run
-from ..model import Model
+from ..core import effects as E
+from ..core.model import Model
+from ..core.run import Run
 from . import attribution as A
 from . import drive as D
 

@@ -2,7 +2,7 @@
 family's grid, and least-squares fits of effect parameters over weighted runs.
 
 Nothing here knows one effect from another: each effect's forms give their grids, bounds, scales
-and which runs they can act on (:mod:`hystcli.effects.base`), and the chain says where in a
+and which runs they can act on (:mod:`hystcli.core.effects.base`), and the chain says where in a
 prediction a candidate sits, so everything before it is computed once per run and reused for
 every grid point (a grid over a tracker latency reruns only the latency).
 
@@ -18,12 +18,13 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .. import effects as E
-from ..effects import kernels
-from ..effects.base import EffectType, Form, Signals
+from ..core import effects as E
+from ..core.effects import kernels
+from ..core.effects.base import EffectType, Form, Signals
+from ..core.model import Model
+from ..core.params import KnobModel, Shape
+from ..core.run import Run
 from ..errors import ModelError
-from ..io import Run
-from ..model import KnobModel, Model, Shape
 
 UNPREDICTED = 1e300
 """The SSE a table cell holds where a grid point cannot predict a run (non-finite): finite, so

@@ -7,10 +7,10 @@ from typing import Callable, Mapping, Sequence
 
 import numpy as np
 
-from .. import effects as E
-from ..effects.base import EffectType
+from ..core import effects as E
+from ..core.effects.base import EffectType
+from ..core.run import Run
 from ..errors import DataError
-from ..io import Run
 from . import drive as D
 from . import search as S
 from .result import MIN_GAIN_PCT, Candidate, Round, _shrink

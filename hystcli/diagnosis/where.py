@@ -8,11 +8,12 @@ from typing import Sequence
 
 import numpy as np
 
-from .. import effects as E
-from ..compensation import knobs_of
+from ..core import effects as E
+from ..core.model import knobs_of
+from ..core.model import Model
+from ..core.params import KnobModel
+from ..core.run import Run
 from ..errors import DataError
-from ..io import Run
-from ..model import KnobModel, Model
 from .result import AMPLITUDE_BANDS, MOVING_DEG_S, PHASES, SPEED_BANDS, TIME_BINS, Breakdown, Residual, Where
 from .search import Prep
 

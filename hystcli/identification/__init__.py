@@ -27,8 +27,9 @@ import numpy as np
 
 from ..errors import IdentificationError
 from ..estimate import Estimate
-from ..io import Run
-from ..model import PAPER_OMEGA, KnobIdentification, KnobModel, Model
+from ..core.run import Run
+from ..core.model import Model
+from ..core.params import KnobIdentification, KnobModel, PAPER_OMEGA
 from ..settings import DEFAULT, Settings
 from ..signal.condition import condition
 from ..signal.reading import read_current

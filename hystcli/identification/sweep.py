@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import IdentificationError
-from ..io import Run
+from ..core.run import Run
 from ..signal.stretches import find_reversals
 
 MIN_SAMPLES = 100

@@ -47,7 +47,7 @@ from scipy.optimize import least_squares
 from threadpoolctl import threadpool_limits
 
 from ..core import kernel
-from ..model import KnobModel
+from ..core.params import KnobModel
 from ..signal.pwl import autocorrelation_time
 from ..signal.stretches import decimation_index
 

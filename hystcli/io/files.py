@@ -9,7 +9,8 @@ from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Iterator
 
 from ..errors import DataError, HystError
-from .runs import Run, _run_text
+from ..core.run import Run
+from .runs import _run_text
 
 
 def check_not_input(path: str | os.PathLike, inputs: Iterable[str | os.PathLike]) -> None:

@@ -11,7 +11,8 @@ from typing import Iterable
 
 from ..errors import ModelError
 from ..estimate import Estimate
-from ..model import PARAM_NAMES, EffectSpec, Geometry, KnobIdentification, KnobModel, Model
+from ..core.model import Model
+from ..core.params import EffectSpec, Geometry, KnobIdentification, KnobModel, PARAM_NAMES
 from .files import atomic_write_text
 from .runs import MODEL_FORMAT, MODEL_VERSION
 

@@ -10,7 +10,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ..io import Run
+from ..core.run import Run
 
 #: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
 CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}

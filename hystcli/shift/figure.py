@@ -12,7 +12,7 @@ import numpy as np
 from ..errors import ShiftDetectionError
 
 if TYPE_CHECKING:
-    from ..model import Model
+    from ..core.model import Model
 
 
 def shift_figure(results: Sequence, model: "Model | None" = None,

@@ -13,7 +13,7 @@ from typing import Any, Protocol
 import numpy as np
 
 from ..errors import DataError, ShiftDetectionError
-from ..io import Run
+from ..core.run import Run
 
 __all__ = ["Probe", "ProbeSample", "ReplayExhausted", "ReplayProbe", "return_knob"]
 

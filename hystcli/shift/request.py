@@ -15,8 +15,8 @@ from dataclasses import dataclass, replace
 from typing import Any, ContextManager, Mapping, Protocol, Sequence
 
 from ..errors import DataError, ParameterError
-from ..io import Run
-from ..model import Model
+from ..core.run import Run
+from ..core.model import Model
 from ..settings import DEFAULT, Settings
 from .probe import Probe
 

@@ -8,8 +8,9 @@ import os
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
 from ..errors import ParameterError
-from ..io import Run, read_run
-from ..model import Model
+from ..core.run import Run
+from ..io import read_run
+from ..core.model import Model
 from .probe import ProbeSample, ReplayProbe
 from .request import ProbeSource, ShiftRequest, select_knobs
 from .result import ShiftResult

@@ -40,8 +40,9 @@ import numpy as np
 
 from ..errors import HystError, ParameterError, ShiftDetectionError
 from ..estimate import Estimate
-from ..io import Run, read_run
-from ..model import Model
+from ..core.run import Run
+from ..io import read_run
+from ..core.model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
 from ..signal.reading import _classify
@@ -463,7 +464,7 @@ def detect_shift(model: Model, probe: Any, knob: int | None = None, *, settings:
         The straight-shaft model, with the identification sweep's reading of the current.
     probe : Probe, Run or path-like
         Steps the knob and reads the current (:class:`.probe.ReplayProbe`, a live device probe);
-        a recorded replay (:class:`hystcli.io.Run`, or its CSV file) is read through a
+        a recorded replay (:class:`hystcli.core.run.Run`, or its CSV file) is read through a
         :class:`.probe.ReplayProbe`.
     knob : int, optional
         Default: the probe's own knob; for a replay, the one knob of the model it records; else

@@ -30,7 +30,7 @@ What drives each cell of the tables (this is how the values were chosen):
   through the shared backbone (the paper's Discussion blames coupling for the 2-DoF residual,
   RMSE 10.1 against 8 deg in 1-DoF), and a larger rate lag on the faster knob.
 
-All effects are real physics terms of :mod:`hystcli.effects` (the ones a later diagnosis can
+All effects are real physics terms of :mod:`hystcli.core.effects` (the ones a later diagnosis can
 find and add to the model), none is noise.
 """
 from __future__ import annotations
@@ -40,10 +40,10 @@ from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
 
 from ..errors import ModelError
-from ..model import Geometry, KnobModel
+from ..core.params import Geometry, KnobModel
 
 if TYPE_CHECKING:  # the twin and the effects load numba and scipy: imported when a catheter is built
-    from ..effects import Effect
+    from ..core.effects import Effect
     from .twin import VirtualCatheter
 
 
@@ -171,7 +171,7 @@ def calibrated_catheter(name: str) -> "VirtualCatheter":
 
 def default_effects() -> "tuple[Effect, ...]":
     """The calibrated catheters' unmodelled effects, validated (see :data:`_DEFAULT_EFFECTS`)."""
-    from ..effects import make_effect
+    from ..core.effects import make_effect
 
     return tuple(make_effect(name, **params) for name, params in _DEFAULT_EFFECTS)
 

@@ -57,8 +57,9 @@ from ..compensation import compensate
 from ..diagnosis import diagnose as _diagnose
 from ..errors import DataError, ShiftDetectionError
 from ..identification import identify
-from ..io import Run
-from ..model import PAPER_OMEGA, Model
+from ..core.run import Run
+from ..core.model import Model
+from ..core.params import PAPER_OMEGA
 from ..shift import ReplayProbe, ShiftResult, detect_shift
 from .calibration import calibrated_catheter
 from .scenarios import (BEYOND_FACTOR, CONTROLLERS, DETECT_MAX_TRAVEL, DETECT_STEP, DIAGNOSED, KNOBS, PAPER_CELLS,
@@ -335,7 +336,7 @@ def identify_catheter(sweeps: Mapping[int, Run], name: str) -> Model:
     """The straight-shaft model of one catheter from one identification sweep per knob.
 
     As in the paper (section III): dead-zone edges and backlash widths from the motor current,
-    omega = 1.45 (:data:`hystcli.model.PAPER_OMEGA`); the heights follow from them
+    omega = 1.45 (:data:`hystcli.core.params.PAPER_OMEGA`); the heights follow from them
     (:func:`hystcli.identification.identify` on its current path).
     """
     knobs, ident = {}, {}

@@ -8,11 +8,11 @@ from typing import Mapping, Sequence
 import numpy as np
 from scipy import signal
 
-from ..effects import ChainState, Effect, as_effects, format_effects
+from ..core.effects import ChainState, Effect, as_effects, format_effects
 from ..errors import DataError, ModelError
 from ..filters import butter_sos
-from ..io import Run
-from ..model import EffectSpec, Shape
+from ..core.run import Run
+from ..core.params import EffectSpec, Shape
 from .twin import CurrentState, VirtualCatheter, _knob_signals
 
 

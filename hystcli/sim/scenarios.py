@@ -10,8 +10,9 @@ from typing import Mapping, Sequence
 import numpy as np
 
 from ..errors import DataError
-from ..io import Run, read_run
-from ..model import Shape
+from ..core.run import Run
+from ..io import read_run
+from ..core.params import Shape
 from .calibration import CALIBRATED_NAMES, calibrated_catheter
 from .twin import VirtualCatheter, nonperiodic, periodic, simulate, sweep
 

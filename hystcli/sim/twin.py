@@ -5,7 +5,7 @@ It owns the true parameters of named virtual catheters, the motions of the paper
 (EM-tracker noise, 20 Hz Butterworth) and two ways to run it: :func:`simulate` (a whole run at
 once; the demo, the tests, the sample data, ``hyst simulate`` through :func:`simulate_motion`)
 and :class:`LiveTwin` (move by move, for the serial emulator), which carry the same states and
-so give the same samples. The tip angle comes from :mod:`hystcli.effects` (the base model of
+so give the same samples. The tip angle comes from :mod:`hystcli.core.effects` (the base model of
 docs/design.md section 3 plus the unmodelled effects of section 8); this module adds the current.
 
 Motor current (signed, mA), for the tendon input ``u`` (the knob angle seen through the coupling
@@ -39,11 +39,12 @@ import numpy as np
 from numba import njit
 
 from ..core import kernel
-from ..effects import (ChainState, Effect, as_effects, contact_current, format_effects, tip_chain)
+from ..core.effects import ChainState, Effect, as_effects, contact_current, format_effects, tip_chain
 from ..errors import DataError, ModelError
 from ..filters import lowpass
-from ..io import Run
-from ..model import EffectSpec, Geometry, KnobModel, Model, Shape
+from ..core.run import Run
+from ..core.model import Model
+from ..core.params import EffectSpec, Geometry, KnobModel, Shape
 from ..names import MOTIONS  # the motions simulate_motion generates (named where `--help` reads them)
 
 
@@ -369,7 +370,7 @@ def simulate(catheter: VirtualCatheter, t: np.ndarray, q: Mapping[int, np.ndarra
     rotation : float
         Bulk rotation of the catheter body (deg).
     effects : sequence of Effect or EffectSpec, optional
-        Unmodelled effects (:mod:`hystcli.effects`); ``None`` means the catheter's defaults,
+        Unmodelled effects (:mod:`hystcli.core.effects`); ``None`` means the catheter's defaults,
         ``()`` none.
     seed : int
         Seed of the sensor noise; the same arguments give the same run.

@@ -1,7 +1,7 @@
 """The one place that lists the effects (docs/design.md section 8), and how effects are named in files
 and on the command line.
 
-A new effect is one module of this package with one :class:`~hystcli.effects.base.EffectType`
+A new effect is one module of this package with one :class:`~hystcli.core.effects.base.EffectType`
 subclass, added to :data:`EFFECTS` below, and its tests.
 """
 from __future__ import annotations
@@ -11,8 +11,8 @@ import re
 from types import MappingProxyType
 from typing import Mapping, Sequence
 
-from ..errors import ModelError
-from ..model import EffectSpec
+from ...errors import ModelError
+from ..params import EffectSpec
 from .base import Effect, EffectType
 from .contact import Contact
 from .coupling import Coupling

@@ -2,7 +2,7 @@
 (compensation), with a state that can be carried between calls.
 
 Whatever order a model lists its effects in, the chain runs them in fixed stages (each effect's
-form names its stage and its rank within it, :class:`~hystcli.effects.base.Form`)::
+form names its stage and its rank within it, :class:`~hystcli.core.effects.base.Form`)::
 
     condition   knob parameters from the run's shape (total curvature) or stated condition
     input       the input x the hysteresis sees, from the commands (lags, coupling)
@@ -27,15 +27,31 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping, Protocol, Sequence
 
 import numpy as np
 
-from ..errors import DataError, ModelError
-from ..model import EffectSpec, KnobModel, Model, Shape
+from ...errors import DataError, ModelError
+from ..params import EffectSpec, KnobModel, Shape
+from ..run import Run
 from . import kernels
 from .base import STAGES, Effect, Signals
 from .registry import as_effects
+
+
+class Model(Protocol):
+    """What the chain reads of a catheter's model: :class:`hystcli.core.model.Model`, which sits
+    above the chain (its prediction and compensation run it), is one."""
+
+    knobs: Mapping[int, KnobModel]
+    effects: Sequence[EffectSpec]
+
+    def knob(self, k: int) -> KnobModel: ...
+
+    def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]: ...
+
+    def require_loop(self, knobs: Sequence[int], what: str) -> None: ...
+
 
 @dataclass(frozen=True)
 class Plan:
@@ -285,7 +301,7 @@ def other_bend(plan: Plan, other_knob: KnobModel | None, other: np.ndarray | Non
                y0: float = 0.0) -> np.ndarray | None:
     """The other section's bend as a coupling of ``plan`` reads it: the other knob's base model
     (with its offset) on its command ``other``, from the tip ``y0``; None when nothing reads it or
-    the other knob's model or command is missing (see :mod:`hystcli.effects.coupling`)."""
+    the other knob's model or command is missing (see :mod:`hystcli.core.effects.coupling`)."""
     if other_knob is None or other is None or not reads_bend(plan):
         return None
     return other_knob.forward(other, y0)
@@ -405,7 +421,11 @@ def predict(model: Model, run, effects: Sequence[Effect | EffectSpec] | None = N
         An unknown or invalid effect.
     """
     effs = as_effects(model.effects if effects is None else effects)
-    offsets = model.offsets_for(run.meta)
+    return _predict(model, model.offsets_for(run.meta), run, effs)
+
+
+def _predict(model: Model, offsets: Mapping[int, float], run: Run, effs: Sequence[Effect]) -> dict[int, np.ndarray]:
+    # predict with the offsets given: the inverse checks its own commands at the offsets it used
     shape = Shape.parse(run.meta.get("shape"))
     cond = run_condition(run.meta, run.source)
     q = {k: np.ascontiguousarray(run[f"q{k}"], dtype=np.float64) for k in (1, 2) if f"q{k}" in run}
@@ -474,7 +494,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
 
     Every stage is monotone in its input, so the chain is undone stage by stage in reverse order
     (sensor, contact, output, hysteresis with its edges, input), each effect by its own
-    :meth:`~hystcli.effects.base.EffectType.inverse`. A stage that reads the other knob
+    :meth:`~hystcli.core.effects.base.EffectType.inverse`. A stage that reads the other knob
     (coupling) needs the other knob's command, which is being solved for too: the first pass
     leaves it out, then both knobs are solved again from the other's last commands until they
     change by less than 1e-10 deg (a contraction for |gain| < 1). The other knob's command is taken
@@ -583,8 +603,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
             # jump where the hysteresis inverse jumps (a reversal), so the iteration can cycle
             # there. Keep the iterate whose forward prediction is closest to the reference.
             def miss(qs) -> float:
-                ys = predict(Model({k: model.knob(k).with_offset(offs[k]) for k in use}),
-                             _commands_run(run, t, qs), effects=effs)
+                ys = _predict(model, {k: offs[k] for k in use}, _commands_run(run, t, qs), effs)
                 return max(float(np.sqrt(np.mean((ys[k] - run[f"r{k}"]) ** 2))) for k in use)
 
             errs = [miss(qs) for qs in history]
@@ -594,9 +613,7 @@ def inverse(model: Model, run, offsets: Mapping[int, float] | None = None,
     return Inverse(q, tuple(dict.fromkeys(warnings + tail_warn)))
 
 
-def _commands_run(run, t, q: Mapping[int, np.ndarray]):
-    from ..io import Run
-
+def _commands_run(run: Run, t, q: Mapping[int, np.ndarray]) -> Run:
     cols = {"t": t} if t is not None else {}
     cols.update({f"q{k}": v for k, v in q.items()})
     meta = {k: v for k, v in run.meta.items() if not k.startswith("offset")}

@@ -22,8 +22,8 @@ What drives the ``-magnitude`` forms is the other section's *bend*, not its knob
 bend either way lengthens the shared path the same, but a knob resting in its dead zone (both
 tendons slack) bends nothing, and after a reversal the bend holds on its backlash plateau while
 the knob travels back. The drive is therefore ``yhat_o``, the other knob's tip as our model
-predicts it: its base hysteresis (:meth:`hystcli.model.KnobModel.forward`, with the run's
-offset) on its command (:attr:`~hystcli.effects.base.Signals.other_tip`). A drive of
+predicts it: its base hysteresis (:meth:`hystcli.core.params.KnobModel.forward`, with the run's
+offset) on its command (:attr:`~hystcli.core.effects.base.Signals.other_tip`). A drive of
 ``|q_o - offset_o|`` made a bent one-knob run (the other knob at rest, its offset non-zero after
 a shift) move this loop where physically nothing drives it. The stateless approximation (the
 other tendon's stretch past its dead-zone edge) is zero in the dead zone too, but misses the

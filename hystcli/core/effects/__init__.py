@@ -24,7 +24,7 @@ latency     the tracker reports the tip late                         tracker
 ==========  =====================================================  ===============================
 
 Every effect has a null setting under which its stage is skipped, so the chain is the base model
-bit for bit (:meth:`hystcli.model.KnobModel.forward`). A model file's effect entry names the
+bit for bit (:meth:`hystcli.core.params.KnobModel.forward`). A model file's effect entry names the
 physics and, when it is not the default, the form: ``{"name": "coupling", "form":
 "deadzone-magnitude", "params": {"gain": 0.1}}``; on the command line and in run metadata
 ``coupling:form=deadzone-magnitude,gain=0.1``.

@@ -1,9 +1,12 @@
-"""The dead-zone + backlash hysteresis model of one knob and of a two-knob catheter.
+"""The parts of a catheter's model below the effect chain: one knob's hysteresis, the shaft.
 
 This module owns the equations of the paper's section II (Kim & Mansi) as fixed by docs/design.md
 section 3: the two envelopes, the forward clamp recursion, its exact inverse (compensation), the
 shift of the model by an ``offset``, the shift a known shaft shape causes (paper eqs. 1-4) and the
-update of both knobs' offsets for a bulk rotation of the catheter body.
+update of both knobs' offsets for a bulk rotation of the catheter body. It also holds the records
+a model carries beside its knobs: an effect's spec (:class:`EffectSpec`) and what identification
+learnt of each knob (:class:`KnobIdentification`). The effect chain (:mod:`hystcli.core.effects`)
+builds on these; the whole catheter, :class:`hystcli.core.model.Model`, builds on both.
 
 Symbols (paper eq. D_hats and eq. model_eqs)::
 
@@ -26,8 +29,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .errors import ModelError
-from .estimate import Estimate
+from ..errors import ModelError
+from ..estimate import Estimate
 
 PARAM_NAMES = ("d_pos", "d_neg", "b_pos", "b_neg", "omega", "h_pos", "h_neg", "offset")
 """The parameters of one knob in file order (docs/design.md section 6)."""
@@ -209,7 +212,7 @@ class KnobModel:
         if not math.isfinite(y0):
             raise ModelError(f"forward: the initial output y0 must be finite, got {y0}")
         out = np.empty_like(x)
-        from .core import kernel  # numba loads on the first prediction, not on import
+        from . import kernel  # numba loads on the first prediction, not on import
 
         kernel.forward(x, *self._kernel_args(), float(y0), out)
         return out
@@ -247,7 +250,7 @@ class KnobModel:
         if q0 is None:
             q0 = self.holding_knob_angle(y0)
         out = np.empty_like(rr)
-        from .core import kernel
+        from . import kernel
 
         kernel.inverse(rr, *self._kernel_args(), float(y0), float(q0), out)
         return out
@@ -416,7 +419,7 @@ def rotate_offsets(offset1: float, offset2: float, delta_deg: float) -> tuple[fl
 
 
 # --------------------------------------------------------------------------------------------
-# the catheter: knobs + geometry + effects
+# what a model carries beside its knobs: effects, identification
 # --------------------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class EffectSpec:
@@ -532,7 +535,7 @@ class KnobIdentification:
         """The cogging ripple, None when the sweep showed none."""
         if self.cogging_period is None:
             return None
-        from .signal.condition import Ripple
+        from ..signal.condition import Ripple
 
         return Ripple(self.cogging_period, self.cogging_sin, self.cogging_cos)
 
@@ -547,145 +550,3 @@ class KnobIdentification:
         """The current with no tendon taut: the mean of the two directions' levels."""
         v = [s for s in (self.no_load_rising, self.no_load_falling) if s is not None]
         return sum(v) / len(v) if v else None
-
-
-@dataclass(frozen=True)
-class Model:
-    """A catheter's hysteresis model: one :class:`KnobModel` per knob, plus optional extras.
-
-    Attributes
-    ----------
-    knobs : mapping of int to KnobModel
-        Knob index (1 = anterior-posterior, 2 = right-left) to its model.
-    geometry : Geometry or None
-        Tendon geometry, for the shift a known shape causes.
-    effects : tuple of EffectSpec
-        Unmodelled effects added by ``hyst diagnose``.
-    meta : mapping
-        Free-form provenance (catheter, source, sha256, source_modified).
-    identification : mapping of int to KnobIdentification
-        What identification learnt per knob (current-slope levels, range, uncertainties).
-    """
-
-    knobs: Mapping[int, KnobModel]
-    geometry: Geometry | None = None
-    effects: tuple[EffectSpec, ...] = ()
-    meta: Mapping[str, object] = field(default_factory=dict)
-    identification: Mapping[int, KnobIdentification] = field(default_factory=dict)
-
-    def __post_init__(self) -> None:
-        if not self.knobs:
-            raise ModelError("a model needs at least one knob")
-        for k, v in self.knobs.items():
-            if k not in (1, 2):
-                raise ModelError(f"knob {k!r} is not a knob of a two-knob catheter (1 or 2)")
-            if not isinstance(v, KnobModel):
-                raise ModelError(f"knob {k} is not a KnobModel")
-        object.__setattr__(self, "knobs", MappingProxyType(dict(sorted(self.knobs.items()))))
-        object.__setattr__(self, "effects", tuple(self.effects))
-        object.__setattr__(self, "meta", MappingProxyType(dict(self.meta)))
-        object.__setattr__(self, "identification", MappingProxyType(dict(self.identification)))
-
-    def require_loop(self, knobs: Sequence[int], what: str) -> None:
-        """Refuse to predict or compensate with a knob whose backlash is a placeholder: a
-        current-only identification whose current did not show it (the model keeps 0 deg there,
-        which predicts nothing). A tip identification's unfixed backlash predicts its record as
-        well as the best fit and is used.
-
-        Raises
-        ------
-        ModelError
-            When such a knob is among ``knobs``.
-        """
-        for k in knobs:
-            ident = self.identification.get(int(k))
-            if ident is None or ident.method != "current":
-                continue
-            unfixed = [u for u in ("b_pos", "b_neg") if u in ident.unfixed]
-            if unfixed:
-                raise ModelError(
-                    f"cannot {what} with this model: knob {k}'s {' and '.join(unfixed)} "
-                    f"{'were' if len(unfixed) > 1 else 'was'} not fixed by its sweep (the motor current "
-                    "does not show the backlash), and the model keeps 0 deg in its place; identify knob "
-                    f"{k} with the tip angle measured. detect-shift can still use this model")
-
-    def knob(self, k: int) -> KnobModel:
-        """The model of knob ``k`` (1 or 2)."""
-        try:
-            return self.knobs[int(k)]
-        except (KeyError, ValueError):
-            raise ModelError(f"the model has no knob {k} (it has knobs {', '.join(map(str, self.knobs))})") from None
-
-    def with_knob(self, k: int, knob: KnobModel) -> "Model":
-        """A copy with knob ``k`` replaced."""
-        knobs = dict(self.knobs)
-        knobs[int(k)] = knob
-        return replace(self, knobs=knobs)
-
-    def with_offsets(self, offsets: Mapping[int, float]) -> "Model":
-        """A copy whose knobs carry the given absolute offsets (others unchanged)."""
-        knobs = dict(self.knobs)
-        for k, o in offsets.items():
-            knobs[int(k)] = self.knob(k).with_offset(o)
-        return replace(self, knobs=knobs)
-
-    def without_shift(self) -> "Model":
-        """The straight-shaft model: every offset set to 0 (the paper's Compensation-Only)."""
-        return self.with_offsets({k: 0.0 for k in self.knobs})
-
-    def rotated(self, delta_deg: float) -> "Model":
-        """Both knobs' offsets after a bulk body rotation by ``delta_deg`` (see :func:`rotate_offsets`)."""
-        o1 = self.knobs[1].offset if 1 in self.knobs else 0.0
-        o2 = self.knobs[2].offset if 2 in self.knobs else 0.0
-        n1, n2 = rotate_offsets(o1, o2, delta_deg)
-        offs = {}
-        if 1 in self.knobs:
-            offs[1] = n1
-        if 2 in self.knobs:
-            offs[2] = n2
-        return self.with_offsets(offs)
-
-    def predict(self, run) -> "object":
-        """The run with ``y<k>`` replaced by what the model and its effects predict for its
-        commands (a measured ``y<k>`` kept as ``y<k>_measured``): what ``hyst predict`` writes.
-
-        Returns a :class:`hystcli.io.Run` (see :func:`hystcli.compensation.predict`).
-        """
-        from .compensation import predict
-
-        return predict(self, run)
-
-    def compensate(self, reference, ignore_shift: bool = False) -> "object":
-        """Knob commands that make the model and its effects follow ``reference``'s ``r<k>``:
-        what ``hyst compensate`` writes, with its warnings.
-
-        Returns a :class:`hystcli.compensation.Compensation` (its ``run`` is the file).
-        """
-        from .compensation import compensate
-
-        return compensate(self, reference, ignore_shift=ignore_shift)
-
-    def offsets_for(self, meta: Mapping[str, str]) -> dict[int, float]:
-        """Which offset each knob uses for a run with metadata ``meta`` (docs/design.md section 6).
-
-        The run's ``offsetK`` when present, else the shift the model's geometry gives for the
-        run's ``shape``, else the model's own offset.
-        """
-        result: dict[int, float] = {}
-        shape_offsets = None
-        if self.geometry is not None and meta.get("shape") not in (None, ""):
-            shape_offsets = self.geometry.offsets(Shape.parse(meta["shape"]))
-        for k, knob in self.knobs.items():
-            key = f"offset{k}"
-            if key in meta and str(meta[key]).strip() != "":
-                try:
-                    result[k] = float(meta[key])
-                except ValueError:
-                    raise ModelError(f"run metadata {key}: {meta[key]!r} is not a number") from None
-                if not math.isfinite(result[k]):
-                    raise ModelError(f"run metadata {key} must be finite")
-            elif shape_offsets is not None:
-                result[k] = shape_offsets[k - 1]
-            else:
-                result[k] = knob.offset
-        return result

@@ -29,18 +29,18 @@ lead limit, so its compensation is approximate (better than none by more than ha
 ``backlash``: the tendon drags in its sheath with a force growing with its speed, so after a
 reversal the knob travels further before the tip follows, the faster the further. In the model's
 terms (docs/design.md section 3) the plateau ends move apart from the dead zone: ``dhat_pos + c|v|``,
-``dhat_neg - c|v|`` (:func:`hystcli.effects.kernels.forward_edges_kernel`'s ``ep``/``en``), while
+``dhat_neg - c|v|`` (:func:`hystcli.core.effects.kernels.forward_edges_kernel`'s ``ep``/``en``), while
 ``d_pos``/``d_neg`` stay (the engaging tendon's edge: its drag shows as the slope's lag, the
 ``input`` forms). A constant speed v makes the backlash plateau ``c*v`` longer; at rest it is the
 base model. The speed v is the knob input's filtered derivative (time constant
-:data:`~hystcli.effects.kernels.SPEED_TAU`, robust to a quantised knob at high rates), up to the
+:data:`~hystcli.core.effects.kernels.SPEED_TAU`, robust to a quantised knob at high rates), up to the
 *previous* sample: one sample late, which changes nothing at catheter speeds and keeps the inverse
 explicit (the move is known before the command is solved for): ``forward(inverse(r)) == r`` to
 float rounding for ``c_visc <= SPEED_TAU`` (0.05 s: 2 deg of widening at 40 deg/s). The inverse
 jumps across the widened plateau at a reversal and its own jump then reads as speed, which widens
 the plateau again by ``c_visc / SPEED_TAU`` of the jump: above 1 an exact inverse is unstable. There
 the inverse reads the speed through a slower filter (``2 * c_visc``,
-:func:`~hystcli.effects.kernels.inverse_speed_tau`): stable, approximate after a speed change
+:func:`~hystcli.core.effects.kernels.inverse_speed_tau`): stable, approximate after a speed change
 (measured on a 1.3 s + 8 s sine reference: the miss on the model is 35-70 % of the uncompensated
 viscous backlash's for c_visc 0.1-0.3 s, 70-90 % up to 3 s). A command step beyond ``max_lead`` deg is limited (a
 guard: the commands then miss, and the inverse says so).

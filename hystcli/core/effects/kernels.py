@@ -13,7 +13,7 @@ import math
 import numpy as np
 from numba import njit
 
-from ..core import kernel
+from .. import kernel
 
 LAG_STATE = 3
 """Size of a first-order lag's state ``[z, t, u]``: output, time and input of the last sample."""

@@ -20,8 +20,8 @@ An effect type (one subclass of :class:`EffectType` per module of this package) 
   without changing a number: where a stage is the identity (:meth:`EffectType.identity_range`)
   and what it does to each knob alone (:meth:`EffectType.knob_key`).
 
-The chain that runs the stages in order, forward and inverse, is :mod:`hystcli.effects.chain`;
-the registry that lists the effect types is :mod:`hystcli.effects.registry`.
+The chain that runs the stages in order, forward and inverse, is :mod:`hystcli.core.effects.chain`;
+the registry that lists the effect types is :mod:`hystcli.core.effects.registry`.
 """
 from __future__ import annotations
 
@@ -32,8 +32,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from ..errors import ModelError
-from ..model import EffectSpec
+from ...errors import ModelError
+from ..params import EffectSpec
 
 STAGES = ("condition", "input", "edges", "output", "contact", "sensor")
 """The stages of one knob's tip chain, in forward order (the hysteresis sits between ``edges``
@@ -163,7 +163,7 @@ class Signals:
 
     def need_t(self, name: str) -> np.ndarray:
         if self.t is None:
-            from ..errors import DataError
+            from ...errors import DataError
 
             raise DataError(f"effect {name} needs the time column t")
         return self.t
@@ -246,7 +246,7 @@ class EffectType:
     def condition(self, eff: "Effect", p: dict[str, float], cond_deg: float, bend_deg: float = 0.0) -> bool:
         """Edit the knob parameters ``p`` in place for the run's condition (deg of curvature, or
         the run's stated ``condition``); True when something changed. ``bend_deg`` is the bend
-        projected on this knob's plane (:meth:`hystcli.model.Shape.projected`; 0 without a shape
+        projected on this knob's plane (:meth:`hystcli.core.params.Shape.projected`; 0 without a shape
         or a knob), for forms that depend on which side the shaft bends to."""
         raise NotImplementedError
 
@@ -266,7 +266,7 @@ class EffectType:
     def widening(self, eff: "Effect") -> float:
         """Growth of both backlash widths with knob speed (s; edges stage): the plateau ends
         ``dhat_pos``/``dhat_neg`` move apart from ``d_pos``/``d_neg`` by ``widening * |v|``, v the
-        knob-speed estimate of :data:`hystcli.effects.kernels.SPEED_TAU` (0: none)."""
+        knob-speed estimate of :data:`hystcli.core.effects.kernels.SPEED_TAU` (0: none)."""
         return 0.0
 
     def delay_side(self, form: str, params: Mapping[str, float]) -> tuple[float | None, float]:
