@@ -19,10 +19,10 @@ import inspect
 from dataclasses import fields
 from typing import Any, Callable, ClassVar, Sequence
 
+from .core.model import Model
+from .core.run import Run
 from .diagnosis import Diagnosis, diagnose
 from .identification import Identification, identify
-from .core.run import Run
-from .core.model import Model
 from .settings import DEFAULT, Settings
 from .shift import ShiftResult
 from .shift.search import detect_shift

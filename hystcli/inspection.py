@@ -14,17 +14,22 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
+from .core.model import Model
+from .core.params import KnobIdentification, KnobModel, PARAM_NAMES
 from .errors import DataError
 from .report.figures import PLOT_FORMATS, figure_bytes
 from .report.table import Table
-from .core.model import Model
-from .core.params import KnobModel, PARAM_NAMES
 
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")
 """Edges a knob's parameters imply (deg): the far edges of the dead zone, the shifted edges."""
 
-_IDENT_FIELDS = ("method", "q_min", "q_max", "rmse", "current_sign", "slope_dead_zone", "slope_loaded",
-                 "current_dead_zone")
+_IDENT_FIELDS = ("method", "q_min", "q_max", "rmse")
+_CALIBRATION_FIELDS = ("current_sign", "slope_dead_zone", "slope_loaded", "current_dead_zone")
+
+
+def _ident_values(ident: KnobIdentification) -> dict[str, Any]:
+    return {**{name: getattr(ident, name) for name in _IDENT_FIELDS},
+            **{name: getattr(ident.calibration, name) for name in _CALIBRATION_FIELDS}}
 
 
 def _knob_values(knob: KnobModel) -> dict[str, float]:
@@ -63,8 +68,8 @@ def identification_table(model: Model) -> Table | None:
         return None
     rows = []
     for k, ident in model.identification.items():
-        rows.append((k, *(getattr(ident, name) for name in _IDENT_FIELDS)))
-    return Table(("knob",) + _IDENT_FIELDS,
+        rows.append((k, *_ident_values(ident).values()))
+    return Table(("knob",) + _IDENT_FIELDS + _CALIBRATION_FIELDS,
                  ("knob", "method", "q min", "q max", "RMSE", "current", "dC/dq dead zone", "dC/dq loaded",
                   "C dead zone"), tuple(rows),
                  ("identified range q (deg); RMSE of the tip fit (deg); the current's sign convention, its "
@@ -91,7 +96,7 @@ def model_summary(model: Model) -> dict[str, Any]:
             "intervals": {n: e.to_dict() for n, e in ident.estimates.items()} if ident is not None else {},
             "unfixed": list(ident.unfixed) if ident is not None else [],
             "identification": (None if ident is None else
-                               {name: getattr(ident, name) for name in _IDENT_FIELDS}),
+                               _ident_values(ident)),
         }
     out["effects"] = [{"name": e.name, "params": dict(e.params)} for e in model.effects]
     out["geometry"] = (None if model.geometry is None else

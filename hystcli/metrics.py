@@ -33,9 +33,9 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .errors import DataError, HystError
-from .core.run import Run
 from .core.params import Shape
+from .core.run import Run
+from .errors import DataError, HystError
 from .report.table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
                            format_text, latex_escape)
 

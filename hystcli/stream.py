@@ -57,9 +57,9 @@ import numpy as np
 from .core import kernel as core_kernel
 from .core.effects import chain
 from .core.effects.registry import as_effects
-from .errors import DataError, ModelError
 from .core.model import Model
 from .core.params import Shape
+from .errors import DataError, ModelError
 from .safety import CatchUp, Limits, RateLimiter
 from .stream_stages import _Bend, _CompiledCoupling, _Hysteresis, _Knob
 

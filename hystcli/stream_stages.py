@@ -7,9 +7,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from .core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
 from .core.effects import chain, kernels
 from .core.effects.base import Effect, Signals
+from .core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
 from .core.params import KnobModel
 
 

@@ -11,7 +11,7 @@ from hystcli.cli import app
 from hystcli.estimate import Estimate
 from hystcli.io import save_model
 from hystcli.core.model import Model
-from hystcli.core.params import EffectSpec, Geometry, KnobIdentification, KnobModel
+from hystcli.core.params import Calibration, EffectSpec, Geometry, KnobIdentification, KnobModel
 
 runner = CliRunner()
 EXAMPLE = dict(d_pos=9.1, d_neg=-8.7, b_pos=6.2, b_neg=5.9, omega=1.45, h_pos=-4.0, h_neg=4.2)
@@ -30,9 +30,10 @@ def models(tmp_path):
     # d_pos fixed to [9.06, 9.14], b_pos bounded below only (the record said nothing above 5)
     estimates = {"d_pos": Estimate(9.1, 9.06, 9.14), "omega": Estimate(1.45, 1.442, 1.458),
                  "b_pos": Estimate(6.2, 5.0, math.inf, fixed=False, reason="the record ends on the plateau")}
-    ident = KnobIdentification(-40.0, 40.0, method="tip", rmse=0.31, estimates=estimates, current_sign="signed",
-                               slope_dead_zone=0.05, slope_loaded_pos=4.8, slope_loaded_neg=5.2,
-                               no_load_rising=126.0, no_load_falling=114.0)
+    ident = KnobIdentification(-40.0, 40.0, method="tip", rmse=0.31, estimates=estimates,
+                               calibration=Calibration(current_sign="signed", slope_dead_zone=0.05,
+                                                       slope_loaded_pos=4.8, slope_loaded_neg=5.2,
+                                                       no_load_rising=126.0, no_load_falling=114.0))
     straight = Model({1: KnobModel(**EXAMPLE), 2: KnobModel(**EXAMPLE)}, Geometry(1.2, 8.0),
                      meta={"catheter": "ice-a", "source": "sweep.csv"}, identification={1: ident})
     shifted = straight.with_offsets({1: 13.5})

@@ -99,8 +99,8 @@ def test_the_sample_sweep_gives_the_loop_that_predicts_it(sample):
         assert e.lo <= getattr(fit.model, name) <= e.hi, (name, e)
     assert any("hyst diagnose" in w for w in fit.warnings)
     # what detect-shift needs is stored with it
-    assert res.model.identification[1] is fit.ident and fit.ident.current_sign == "signed"
-    assert set(fit.ident.current_edges) == {"pos", "neg"}
+    assert res.model.identification[1] is fit.ident and fit.ident.calibration.current_sign == "signed"
+    assert set(fit.ident.calibration.current_edges) == {"pos", "neg"}
 
 
 @pytest.mark.slow
@@ -150,7 +150,7 @@ def test_a_magnitude_current_is_read_as_one_with_the_same_edges(sample):
     run, _, signed = sample
     mag = run.with_columns(c1=np.abs(run["c1"] - 120.0))
     fit = identify(mag, use_tip=False).fits[1]
-    assert fit.current.sign == "magnitude" and fit.ident.current_sign == "magnitude"
+    assert fit.current.sign == "magnitude" and fit.ident.calibration.current_sign == "magnitude"
     for name in ("d_pos", "d_neg"):
         e, ref = fit.estimates[name], signed.fits[1].estimates[name]
         assert e.fixed and abs(e.value - ref.value) <= 0.1, (name, e, ref)
@@ -167,8 +167,8 @@ def test_the_model_file_keeps_the_estimates_and_the_current_edges(sample, tmp_pa
     save_model(tmp_path / "m.json", res.model)
     back = load_model(tmp_path / "m.json").identification[1]
     assert dict(back.estimates) == fit.estimates
-    assert dict(back.current_edges) == fit.current.edges
-    assert back.method == "tip" and back.rmse == fit.rmse and back.current_sign == "signed"
+    assert dict(back.calibration.current_edges) == fit.current.edges
+    assert back.method == "tip" and back.rmse == fit.rmse and back.calibration.current_sign == "signed"
     assert back.unfixed == fit.unfixed
     assert back.q_min == pytest.approx(-40.0, abs=1e-6) and back.q_max == pytest.approx(40.0, abs=1e-6)
 
@@ -312,14 +312,14 @@ def test_stored_levels_for_detect_shift():
     res = identify(run, use_tip=False)
     ident = res.fits[1].ident
     cur = EXAMPLE_A.current
-    assert ident.current_sign == "signed"
-    for s in (ident.slope_loaded_pos, ident.slope_loaded_neg):
+    assert ident.calibration.current_sign == "signed"
+    for s in (ident.calibration.slope_loaded_pos, ident.calibration.slope_loaded_neg):
         assert s == pytest.approx(cur.k_load * (1 + cur.mu), rel=0.1)
-    assert abs(ident.slope_dead_zone) < 0.1 * cur.k_load
-    assert ident.no_load_rising == pytest.approx(cur.no_load + cur.coulomb, abs=1.5)
-    assert ident.no_load_falling == pytest.approx(cur.no_load - cur.coulomb, abs=1.5)
+    assert abs(ident.calibration.slope_dead_zone) < 0.1 * cur.k_load
+    assert ident.calibration.no_load_rising == pytest.approx(cur.no_load + cur.coulomb, abs=1.5)
+    assert ident.calibration.no_load_falling == pytest.approx(cur.no_load - cur.coulomb, abs=1.5)
     for side, true in (("pos", 9.1), ("neg", -8.7)):
-        e = ident.current_edges[side]
+        e = ident.calibration.current_edges[side]
         assert e.fixed and abs(e.value - true) <= 0.5
     assert ident.q_min == pytest.approx(-40.0, abs=1e-3) and ident.q_max == pytest.approx(40.0, abs=1e-3)
     assert dict(res.model.identification) == {k: f.ident for k, f in res.fits.items()}
@@ -366,7 +366,7 @@ def test_identify_current_sign_is_read_or_taken_as_told(tmp_path):
     out = tmp_path / "m.json"
     res = runner.invoke(app, ["identify", str(tmp_path / "mag.csv"), "--current-only", "--current-sign",
                               "magnitude", "-o", str(out), "-q"])
-    assert res.exit_code == 0 and load_model(out).identification[1].current_sign == "magnitude"
+    assert res.exit_code == 0 and load_model(out).identification[1].calibration.current_sign == "magnitude"
     res = runner.invoke(app, ["identify", str(SWEEP), "--current-sign", "both", "-o", str(tmp_path / "x.json")])
     assert res.exit_code == 2 and not (tmp_path / "x.json").exists()
 
@@ -416,8 +416,8 @@ def test_knob_columns_and_arguments():
         identify(no_c, knobs=[1], use_tip=False)
     # ... the tip fit does not: without a current nothing is read of it
     fit = identify(no_c).fits[1]
-    assert fit.method == "tip" and fit.current is None and fit.ident.current_sign is None
-    assert fit.ident.current_edges == {}
+    assert fit.method == "tip" and fit.current is None and fit.ident.calibration.current_sign is None
+    assert fit.ident.calibration.current_edges == {}
     no_y = Run({"t": good["t"], "q1": good["q1"]}, source="s.csv")
     with pytest.raises(IdentificationError, match="needs a pair of columns q1,c1 or q2,c2 \\(or q1,y1"):
         identify(no_y)

@@ -19,7 +19,7 @@ from hystcli.core.run import Run
 from hystcli.io import (MAX_ABS_VALUE, dumps_model, format_run, load_model, model_from_dict, model_to_dict, parse_run,
                         read_run, save_model, write_run)
 from hystcli.core.model import Model
-from hystcli.core.params import EffectSpec, Geometry, KnobIdentification, KnobModel
+from hystcli.core.params import Calibration, EffectSpec, Geometry, KnobIdentification, KnobModel
 
 GOOD = "# catheter: ice-a\n# shape: alpha=90,theta=0\n# lab_note: kept\nt,q1,y1\n0,0,0\n0.1,1.5,0.2\n0.2,3,0.4\n"
 
@@ -104,9 +104,10 @@ def sample_model():
         {1: KnobIdentification(-40.0, 40.0, method="tip", rmse=0.31,
                                estimates={"d_pos": Estimate(9.1, 9.06, 9.14),
                                           "b_pos": Estimate(6.2, 5.0, math.inf, fixed=False, reason="open above")},
-                               current_sign="signed", current_edges={"pos": Estimate(9.3, 9.2, 9.4)},
-                               slope_dead_zone=0.05, slope_loaded_pos=4.8, no_load_rising=126.0,
-                               no_load_falling=114.0)},
+                               calibration=Calibration(current_sign="signed",
+                                                       current_edges={"pos": Estimate(9.3, 9.2, 9.4)},
+                                                       slope_dead_zone=0.05, slope_loaded_pos=4.8,
+                                                       no_load_rising=126.0, no_load_falling=114.0))},
     )
 
 
@@ -286,14 +287,15 @@ def test_values_beyond_the_plausible_are_refused_on_read_and_on_write(tmp_path):
 
 
 def test_a_cogging_ripple_round_trips_through_the_model_file(tmp_path):
-    ident = KnobIdentification(-40.0, 40.0, current_sign="signed", no_load_rising=120.0, cogging_period=4.7,
-                               cogging_sin=1.9, cogging_cos=-0.6)
+    ident = KnobIdentification(-40.0, 40.0, calibration=Calibration(
+        current_sign="signed", no_load_rising=120.0, cogging_period=4.7, cogging_sin=1.9, cogging_cos=-0.6))
     m = Model({1: KnobModel(9.1, -8.7, 6.2, 5.9, 1.45, -4.0, 4.2)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)
     back = load_model(p).identification[1]
-    assert (back.cogging_period, back.cogging_sin, back.cogging_cos) == (4.7, 1.9, -0.6)
-    assert back.ripple(4.7 / 4) == pytest.approx(1.9)    # sin(pi/2) = 1, cos(pi/2) = 0
+    cal = back.calibration
+    assert (cal.cogging_period, cal.cogging_sin, cal.cogging_cos) == (4.7, 1.9, -0.6)
+    assert cal.ripple(4.7 / 4) == pytest.approx(1.9)    # sin(pi/2) = 1, cos(pi/2) = 0
     # a model without one writes no cogging keys (older files read the same)
     save_model(p, sample_model())
     assert "cogging" not in p.read_text()
@@ -326,19 +328,21 @@ def test_open_intervals_round_trip_through_the_model_file_as_null(tmp_path):
         -40.0, 40.0, method="current",
         estimates={"b_pos": Estimate(0.0, 0.0, math.inf, fixed=False, reason="not shown by the current"),
                    "d_pos": Estimate(11.7, 11.5, 11.9)},
-        current_sign="magnitude",
-        current_edges={"pos": Estimate(11.7, 11.5, 11.9), "neg": Estimate(-12.4, -math.inf, -12.0, fixed=False,
-                                                                           reason="seen at the stretch's end")})
+        calibration=Calibration(
+            current_sign="magnitude",
+            current_edges={"pos": Estimate(11.7, 11.5, 11.9), "neg": Estimate(-12.4, -math.inf, -12.0, fixed=False,
+                                                                               reason="seen at the stretch's end")}))
     m = Model({1: KnobModel(11.7, -12.4, 0.0, 0.6, 1.45, -4.0, 4.2)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)
     raw = json.loads(p.read_text())["identification"]["1"]
     assert raw["current_edges"]["neg"]["lo"] is None and raw["estimates"]["b_pos"]["hi"] is None
     back = load_model(p).identification[1]
-    assert back.current_edges["neg"] == ident.current_edges["neg"]
-    assert back.current_edges["neg"].lo == -math.inf and not back.current_edges["neg"].fixed
+    edge = back.calibration.current_edges["neg"]
+    assert edge == ident.calibration.current_edges["neg"]
+    assert edge.lo == -math.inf and not edge.fixed
     assert back.estimates["b_pos"].reason == "not shown by the current"
-    assert back.unfixed == ("b_pos",) and back.current_sign == "magnitude" and back.method == "current"
+    assert back.unfixed == ("b_pos",) and back.calibration.current_sign == "magnitude" and back.method == "current"
     assert back.stderr == {"d_pos": pytest.approx(0.2 / 1.959964, rel=1e-5)}
     assert back == ident
 
@@ -347,7 +351,8 @@ def test_a_current_only_model_without_its_backlash_refuses_to_predict(tmp_path):
     # the backlash stays in the file as 0 deg, marked not fixed; predicting with it would be
     # predicting with a placeholder, so the model says so (detect-shift can still use it)
     est = {n: Estimate(0.0, 0.0, math.inf, fixed=False, reason="not shown") for n in ("b_pos", "b_neg")}
-    ident = KnobIdentification(-40.0, 40.0, method="current", estimates=est, current_sign="signed")
+    ident = KnobIdentification(-40.0, 40.0, method="current", estimates=est,
+                               calibration=Calibration(current_sign="signed"))
     m = Model({1: KnobModel(9.1, -8.7, 0.0, 0.0, 1.45, 0.0, 0.0)}, identification={1: ident})
     p = tmp_path / "m.json"
     save_model(p, m)

@@ -22,7 +22,7 @@ from hystcli.device import Device
 from hystcli.estimate import Estimate
 from hystcli.io import load_model, save_model
 from hystcli.core.model import Model
-from hystcli.core.params import KnobIdentification
+from hystcli.core.params import Calibration, KnobIdentification
 from simrobot import TIMEOUT, sim_robot, start_sim_robot, stop  # noqa: F401 - test_rotate_shift imports them from here
 
 CAT = calibrated_catheter("ice-a")  # what `hyst sim-robot --catheter ice-a` serves
@@ -55,12 +55,13 @@ def ice_a_model() -> Model:
     ident = {}
     for k, km in CAT.knobs.items():
         ident[k] = KnobIdentification(
-            q_min=-40.0, q_max=40.0, method="given", current_sign="signed",
-            current_edges={"pos": Estimate(km.d_pos, km.d_pos - 0.05, km.d_pos + 0.05),
-                           "neg": Estimate(km.d_neg, km.d_neg - 0.05, km.d_neg + 0.05)},
-            no_load_rising=moving_up, no_load_falling=moving_down,
-            slope_loaded_pos=cur.k_load * (1 + cur.mu), slope_loaded_neg=cur.k_load * (1 + cur.mu),
-            edge_level_pos=moving_up, edge_level_neg=moving_down)
+            q_min=-40.0, q_max=40.0, method="given", calibration=Calibration(
+                current_sign="signed",
+                current_edges={"pos": Estimate(km.d_pos, km.d_pos - 0.05, km.d_pos + 0.05),
+                               "neg": Estimate(km.d_neg, km.d_neg - 0.05, km.d_neg + 0.05)},
+                no_load_rising=moving_up, no_load_falling=moving_down,
+                slope_loaded_pos=cur.k_load * (1 + cur.mu), slope_loaded_neg=cur.k_load * (1 + cur.mu),
+                edge_level_pos=moving_up, edge_level_neg=moving_down))
     return Model(dict(CAT.knobs), CAT.geometry, meta={"catheter": CAT.name}, identification=ident)
 
 

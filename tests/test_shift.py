@@ -18,7 +18,7 @@ from hystcli.identification import identify
 from hystcli.core.run import Run
 from hystcli.io import read_run
 from hystcli.core.model import Model
-from hystcli.core.params import KnobIdentification, KnobModel
+from hystcli.core.params import Calibration, KnobIdentification, KnobModel
 from hystcli.shift import (DEFAULT_MAX_TRAVEL, ProbeSample, ReplayExhausted, ReplayProbe, ShiftResult,
                            apply_shift, default_max_travel, detect_shift, plot_shift, reference_of)
 
@@ -105,7 +105,7 @@ def test_sample_replays_give_their_true_offset(sample_models, name, knob):
     assert r.reference == "current" and r.returned and probe.position() == r.start == 0.0
     km = model.knob(knob)
     assert r.d_pos == pytest.approx(km.d_pos + r.offset) and r.d_neg == pytest.approx(km.d_neg + r.offset)
-    edge = model.identification[knob].current_edges[r.edge]
+    edge = model.identification[knob].calibration.current_edges[r.edge]
     assert r.offset == pytest.approx(r.edge_found_at - edge.value)
     ev = r.evidence
     assert ev.statistic > ev.threshold and ev.edge_lo <= r.edge_found_at <= ev.edge_hi
@@ -166,10 +166,11 @@ def law_model(edges=None, q_range=(-40.0, 40.0), estimates=None, method="given")
     if edges is None:
         edges = {"pos": Estimate(9.0, 8.95, 9.05), "neg": Estimate(-5.0, -5.05, -4.95)}
     ident = KnobIdentification(q_range[0], q_range[1], method=method, estimates=estimates or {},
-                               current_sign="signed", current_edges=edges,
-                               no_load_rising=NO_LOAD + COULOMB, no_load_falling=NO_LOAD - COULOMB,
-                               slope_loaded_pos=K_LOAD, slope_loaded_neg=K_LOAD,
-                               edge_level_pos=NO_LOAD + COULOMB, edge_level_neg=NO_LOAD - COULOMB)
+                               calibration=Calibration(
+                                   current_sign="signed", current_edges=edges,
+                                   no_load_rising=NO_LOAD + COULOMB, no_load_falling=NO_LOAD - COULOMB,
+                                   slope_loaded_pos=K_LOAD, slope_loaded_neg=K_LOAD,
+                                   edge_level_pos=NO_LOAD + COULOMB, edge_level_neg=NO_LOAD - COULOMB))
     return Model({1: STRAIGHT}, identification={1: ident})
 
 

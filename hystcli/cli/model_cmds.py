@@ -118,7 +118,7 @@ def _ident(result, knob: int):  # noqa: ANN001, ANN202 - identify.Identification
 def _cogging(result, knob: int) -> dict | None:  # noqa: ANN001 - identify.Identification
     """The cogging ripple identify read on this knob's current, for ``--format json``."""
     ident = _ident(result, knob)
-    r = None if ident is None else ident.ripple
+    r = None if ident is None else ident.calibration.ripple
     return None if r is None else {"period": r.period, "sin": r.sin, "cos": r.cos, "amplitude": r.amplitude}
 
 

@@ -5,8 +5,9 @@ section 3: the two envelopes, the forward clamp recursion, its exact inverse (co
 shift of the model by an ``offset``, the shift a known shaft shape causes (paper eqs. 1-4) and the
 update of both knobs' offsets for a bulk rotation of the catheter body. It also holds the records
 a model carries beside its knobs: an effect's spec (:class:`EffectSpec`) and what identification
-learnt of each knob (:class:`KnobIdentification`). The effect chain (:mod:`hystcli.core.effects`)
-builds on these; the whole catheter, :class:`hystcli.core.model.Model`, builds on both.
+learnt of each knob (:class:`KnobIdentification`, with Algorithm 1's :class:`Calibration` of the
+motor current). The effect chain (:mod:`hystcli.core.effects`) builds on these; the whole
+catheter, :class:`hystcli.core.model.Model`, builds on both.
 
 Symbols (paper eq. D_hats and eq. model_eqs)::
 
@@ -435,22 +436,15 @@ class EffectSpec:
 
 
 @dataclass(frozen=True)
-class KnobIdentification:
-    """What ``hyst identify`` learnt about one knob beyond its eight parameters.
+class Calibration:
+    """Algorithm 1's calibration record of one knob: how the straight sweep's motor current reads.
 
-    Stored in the model file so that ``detect-shift`` runs with nothing given, and so that every
-    command knows what the record fixed.
+    ``detect-shift`` measures a shift from these (with nothing else given); a sweep without a
+    current leaves them empty (``current_sign`` None). In a model file they stand beside the rest
+    of the knob's identification, under the same names.
 
     Attributes
     ----------
-    q_min, q_max : float
-        Knob range the model was identified on (deg).
-    method : str
-        ``"tip"``, ``"current"`` or ``"given"`` (a model read against a record it did not come from).
-    rmse : float or None
-        RMSE of the model against the measured tip angle (deg), when the sweep had one.
-    estimates : mapping of str to Estimate
-        The seven parameters with their intervals; ``fixed`` False for what the sweep did not fix.
     current_sign : str or None
         How the drive reports its current: ``"signed"`` or ``"magnitude"`` (None: no current).
     current_edges : mapping of str to Estimate
@@ -475,11 +469,6 @@ class KnobIdentification:
         The motor's cogging ripple (period, deg; amplitudes), None where the sweep showed none.
     """
 
-    q_min: float
-    q_max: float
-    method: str = "tip"
-    rmse: float | None = None
-    estimates: Mapping[str, "Estimate"] = field(default_factory=dict)
     current_sign: str | None = None
     current_edges: Mapping[str, "Estimate"] = field(default_factory=dict)
     no_load_rising: float | None = None
@@ -502,7 +491,6 @@ class KnobIdentification:
     """Numeric fields a model file may leave out."""
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "estimates", MappingProxyType(dict(self.estimates)))
         object.__setattr__(self, "current_edges", MappingProxyType(dict(self.current_edges)))
         if self.current_sign not in (None, "signed", "magnitude"):
             raise ModelError(f"identification: current_sign must be signed or magnitude, got {self.current_sign!r}")
@@ -519,16 +507,6 @@ class KnobIdentification:
                                  f"got {self.cogging_period!r}")
             if not (math.isfinite(self.cogging_sin) and math.isfinite(self.cogging_cos)):
                 raise ModelError("identification: cogging_sin and cogging_cos must be finite")
-
-    @property
-    def unfixed(self) -> tuple[str, ...]:
-        """Parameters the sweep did not fix."""
-        return tuple(n for n, e in self.estimates.items() if not e.fixed)
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        """One-sigma uncertainties of the fixed parameters (from their intervals)."""
-        return {n: e.stderr for n, e in self.estimates.items() if e.fixed and math.isfinite(e.stderr)}
 
     @property
     def ripple(self):  # noqa: ANN201 - hystcli.signal.condition.Ripple or None
@@ -550,3 +528,47 @@ class KnobIdentification:
         """The current with no tendon taut: the mean of the two directions' levels."""
         v = [s for s in (self.no_load_rising, self.no_load_falling) if s is not None]
         return sum(v) / len(v) if v else None
+
+
+@dataclass(frozen=True)
+class KnobIdentification:
+    """What ``hyst identify`` learnt about one knob beyond its eight parameters.
+
+    Stored in the model file so that ``detect-shift`` runs with nothing given, and so that every
+    command knows what the record fixed.
+
+    Attributes
+    ----------
+    q_min, q_max : float
+        Knob range the model was identified on (deg).
+    method : str
+        ``"tip"``, ``"current"`` or ``"given"`` (a model read against a record it did not come from).
+    rmse : float or None
+        RMSE of the model against the measured tip angle (deg), when the sweep had one.
+    estimates : mapping of str to Estimate
+        The seven parameters with their intervals; ``fixed`` False for what the sweep did not fix.
+    calibration : Calibration
+        How the sweep's motor current reads, for Algorithm 1 (empty without a current).
+    """
+
+    q_min: float
+    q_max: float
+    method: str = "tip"
+    rmse: float | None = None
+    estimates: Mapping[str, "Estimate"] = field(default_factory=dict)
+    calibration: Calibration = Calibration()
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "estimates", MappingProxyType(dict(self.estimates)))
+        if not isinstance(self.calibration, Calibration):
+            raise ModelError(f"identification: calibration must be a Calibration, got {self.calibration!r}")
+
+    @property
+    def unfixed(self) -> tuple[str, ...]:
+        """Parameters the sweep did not fix."""
+        return tuple(n for n, e in self.estimates.items() if not e.fixed)
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        """One-sigma uncertainties of the fixed parameters (from their intervals)."""
+        return {n: e.stderr for n, e in self.estimates.items() if e.fixed and math.isfinite(e.stderr)}

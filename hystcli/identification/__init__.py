@@ -25,11 +25,11 @@ from typing import Sequence
 
 import numpy as np
 
+from ..core.model import Model
+from ..core.params import Calibration, KnobIdentification, KnobModel, PAPER_OMEGA
+from ..core.run import Run
 from ..errors import IdentificationError
 from ..estimate import Estimate
-from ..core.run import Run
-from ..core.model import Model
-from ..core.params import KnobIdentification, KnobModel, PAPER_OMEGA
 from ..settings import DEFAULT, Settings
 from ..signal.condition import condition
 from ..signal.reading import read_current
@@ -373,7 +373,7 @@ def _current_path(reading: CurrentReading | None, omega: float | None, chk: Swee
 # --------------------------------------------------------------------------------------------
 def _identification(reading: CurrentReading | None, chk: SweepCheck, estimates: dict[str, Estimate],
                     rmse: float | None, method: str) -> KnobIdentification:
-    kw: dict = {}
+    calibration = Calibration()
     if reading is not None:
         kw = dict(current_sign=reading.sign, current_edges=dict(reading.edges),
                   no_load_rising=reading.no_load.get(1), no_load_falling=reading.no_load.get(-1),
@@ -384,8 +384,9 @@ def _identification(reading: CurrentReading | None, chk: SweepCheck, estimates: 
         if reading.ripple is not None:
             kw.update(cogging_period=reading.ripple.period, cogging_sin=reading.ripple.sin,
                       cogging_cos=reading.ripple.cos)
+        calibration = Calibration(**kw)
     return KnobIdentification(q_min=chk.q_min, q_max=chk.q_max, method=method, rmse=rmse,
-                              estimates=dict(estimates), **kw)
+                              estimates=dict(estimates), calibration=calibration)
 
 
 def current_levels(run: Run, knob: int, model: KnobModel, settings: Settings = DEFAULT) -> KnobIdentification:

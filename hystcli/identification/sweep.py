@@ -12,8 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import IdentificationError
 from ..core.run import Run
+from ..errors import IdentificationError
 from ..signal.stretches import find_reversals
 
 MIN_SAMPLES = 100

@@ -8,8 +8,8 @@ import tempfile
 from pathlib import Path
 from typing import BinaryIO, Callable, Iterable, Iterator
 
-from ..errors import DataError, HystError
 from ..core.run import Run
+from ..errors import DataError, HystError
 from .runs import _run_text
 
 

@@ -47,6 +47,7 @@ from typing import Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from ..core.run import Run
 from ..errors import DataError
 from .mapping import (ANGLE_UNITS, ANTI_ALIAS_FRACTION, AUTO, COMMENT_PREFIXES, CURRENT_UNIT, CURRENT_UNITS,
                       IRREGULAR, MAPPING_FORMAT, MAPPING_VERSION, MAP_SYNTAX, MRDLAB, PRESETS, TARGETS, TIME_REPAIRS,
@@ -55,7 +56,6 @@ from .mapping import (ANGLE_UNITS, ANTI_ALIAS_FRACTION, AUTO, COMMENT_PREFIXES, 
                       parse_number, parse_separator, unit_names)
 from .reading import (SNIFF_LINES, Layout, _gain_drift, _parse_table, _readme_lines, _render_meta, _round,
                       _table_fast, _time, read_text, resample, resolve_columns, sniff_separator, split_table)
-from ..core.run import Run
 from .runs import _parse_meta_line as _meta_line
 
 

@@ -9,10 +9,10 @@ import os
 from pathlib import Path
 from typing import Iterable
 
+from ..core.model import Model
+from ..core.params import Calibration, EffectSpec, Geometry, KnobIdentification, KnobModel, PARAM_NAMES
 from ..errors import ModelError
 from ..estimate import Estimate
-from ..core.model import Model
-from ..core.params import EffectSpec, Geometry, KnobIdentification, KnobModel, PARAM_NAMES
 from .files import atomic_write_text
 from .runs import MODEL_FORMAT, MODEL_VERSION
 
@@ -113,11 +113,12 @@ def _identification_of(d: dict, source: str, key: str) -> KnobIdentification:
         method=str(d.get("method", "tip")),
         rmse=None if d.get("rmse") is None else _num(d["rmse"], "identification rmse"),
         estimates=estimates(d.get("estimates"), "estimates"),
-        current_sign=None if sign is None else str(sign),
-        current_edges=estimates(d.get("current_edges"), "current_edges"),
-        slope_dead_zone=_num(d.get("slope_dead_zone", 0.0), "identification slope_dead_zone"),
-        **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
-           for name in KnobIdentification.OPTIONAL})
+        calibration=Calibration(
+            current_sign=None if sign is None else str(sign),
+            current_edges=estimates(d.get("current_edges"), "current_edges"),
+            slope_dead_zone=_num(d.get("slope_dead_zone", 0.0), "identification slope_dead_zone"),
+            **{name: None if d.get(name) is None else _num(d[name], f"identification {name}")
+               for name in Calibration.OPTIONAL}))
 
 
 def model_to_dict(model: Model) -> dict:
@@ -140,11 +141,13 @@ def model_to_dict(model: Model) -> dict:
 def _identification_dict(v: KnobIdentification) -> dict:
     out: dict = {"q_min": v.q_min, "q_max": v.q_max, "method": v.method, "rmse": v.rmse,
                  "estimates": {n: e.to_dict() for n, e in v.estimates.items()}}
-    if v.current_sign is not None:
-        out["current_sign"] = v.current_sign
-        out["current_edges"] = {n: e.to_dict() for n, e in v.current_edges.items()}
-        out["slope_dead_zone"] = v.slope_dead_zone
-    out.update({name: getattr(v, name) for name in KnobIdentification.OPTIONAL if getattr(v, name) is not None})
+    # a model file keeps the calibration's fields beside the rest of the identification (design section 6)
+    c = v.calibration
+    if c.current_sign is not None:
+        out["current_sign"] = c.current_sign
+        out["current_edges"] = {n: e.to_dict() for n, e in c.current_edges.items()}
+        out["slope_dead_zone"] = c.slope_dead_zone
+    out.update({name: getattr(c, name) for name in Calibration.OPTIONAL if getattr(c, name) is not None})
     return out
 
 

@@ -12,8 +12,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
-from ..errors import DataError, ShiftDetectionError
 from ..core.run import Run
+from ..errors import DataError, ShiftDetectionError
 
 __all__ = ["Probe", "ProbeSample", "ReplayExhausted", "ReplayProbe", "return_knob"]
 

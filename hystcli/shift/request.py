@@ -14,9 +14,9 @@ import os
 from dataclasses import dataclass, replace
 from typing import Any, ContextManager, Mapping, Protocol, Sequence
 
-from ..errors import DataError, ParameterError
-from ..core.run import Run
 from ..core.model import Model
+from ..core.run import Run
+from ..errors import DataError, ParameterError
 from ..settings import DEFAULT, Settings
 from .probe import Probe
 

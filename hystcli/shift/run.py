@@ -7,10 +7,10 @@ import contextlib
 import os
 from typing import Any, Callable, Iterator, Mapping, Sequence
 
-from ..errors import ParameterError
-from ..core.run import Run
-from ..io import read_run
 from ..core.model import Model
+from ..core.run import Run
+from ..errors import ParameterError
+from ..io import read_run
 from .probe import ProbeSample, ReplayProbe
 from .request import ProbeSource, ShiftRequest, select_knobs
 from .result import ShiftResult

@@ -38,11 +38,11 @@ from typing import Any, Callable, Mapping
 
 import numpy as np
 
+from ..core.model import Model
+from ..core.run import Run
 from ..errors import HystError, ParameterError, ShiftDetectionError
 from ..estimate import Estimate
-from ..core.run import Run
 from ..io import read_run
-from ..core.model import Model
 from ..settings import DEFAULT, Settings
 from ..signal.pwl import fit_piecewise, knot_interval, profile
 from ..signal.reading import _classify
@@ -87,12 +87,12 @@ def _side_reference(ident, km, d: int, settings: Settings):  # noqa: ANN001, ANN
     measured from."""
     side, name = ("pos", "d_pos") if d > 0 else ("neg", "d_neg")
     tip_edge = float(getattr(km, name))
-    if ident is None or ident.current_sign is None:
+    if ident is None or ident.calibration.current_sign is None:
         est = None if ident is None else ident.estimates.get(name)
         if est is not None and not est.fixed:
             return None, "model", f"the identification did not fix {name} ({est.reason})"
         return Estimate(tip_edge, tip_edge, tip_edge), "model", ""
-    ce = ident.current_edges.get(side)
+    ce = ident.calibration.current_edges.get(side)
     if ce is None or not ce.fixed:
         why = "did not show" if ce is None else f"did not fix ({ce.reason})"
         return None, "current", (f"the identification sweep's current {why} where the {side} tendon is taken up, "
@@ -119,22 +119,23 @@ def reference_of(model: Model, knob: int, settings: Settings = DEFAULT, *,
         if e is not None:
             edges[d] = e
         kinds[d], why[d] = kind, w
-    sign = "signed" if ident is None or ident.current_sign is None else ident.current_sign
+    cal = None if ident is None else ident.calibration
+    sign = "signed" if cal is None or cal.current_sign is None else cal.current_sign
     levels = {1: None, -1: None}
     slope = 0.0
     spread = 0.0
     ripple = None
-    if ident is not None:
-        levels = {1: ident.edge_level_pos, -1: ident.edge_level_neg}
-        slope = max(s for s in (ident.slope_loaded_pos, ident.slope_loaded_neg, 0.0) if s is not None)
-        if ident.no_load_rising is not None and ident.no_load_falling is not None:
-            spread = 0.5 * abs(ident.no_load_rising - ident.no_load_falling)
-        ripple = ident.ripple
+    if cal is not None:
+        levels = {1: cal.edge_level_pos, -1: cal.edge_level_neg}
+        slope = max(s for s in (cal.slope_loaded_pos, cal.slope_loaded_neg, 0.0) if s is not None)
+        if cal.no_load_rising is not None and cal.no_load_falling is not None:
+            spread = 0.5 * abs(cal.no_load_rising - cal.no_load_falling)
+        ripple = cal.ripple
     if eps_upper is None and slope > 0:
         eps_upper = settings.contact_factor * slope
-    dead = 0.0 if ident is None else float(ident.slope_dead_zone)
-    noise = 0.0 if ident is None or ident.current_noise is None else float(ident.current_noise)
-    crange = (None, None) if ident is None else (ident.current_min, ident.current_max)
+    dead = 0.0 if cal is None else float(cal.slope_dead_zone)
+    noise = 0.0 if cal is None or cal.current_noise is None else float(cal.current_noise)
+    crange = (None, None) if cal is None else (cal.current_min, cal.current_max)
     return Reference(sign=sign, edges=edges, kinds=kinds, why_not=why, edge_level=levels, slope_loaded=slope,
                      dead_slope=dead, noise=noise, eps_upper=eps_upper, ripple=ripple, at_rest_spread=spread,
                      current_range=crange)

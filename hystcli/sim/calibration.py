@@ -39,8 +39,8 @@ from dataclasses import replace
 from types import MappingProxyType
 from typing import TYPE_CHECKING, Any, Mapping
 
-from ..errors import ModelError
 from ..core.params import Geometry, KnobModel
+from ..errors import ModelError
 
 if TYPE_CHECKING:  # the twin and the effects load numba and scipy: imported when a catheter is built
     from ..core.effects import Effect

@@ -54,12 +54,12 @@ from threadpoolctl import threadpool_limits
 
 from .. import metrics
 from ..compensation import compensate
+from ..core.model import Model
+from ..core.params import PAPER_OMEGA
+from ..core.run import Run
 from ..diagnosis import diagnose as _diagnose
 from ..errors import DataError, ShiftDetectionError
 from ..identification import identify
-from ..core.run import Run
-from ..core.model import Model
-from ..core.params import PAPER_OMEGA
 from ..shift import ReplayProbe, ShiftResult, detect_shift
 from .calibration import calibrated_catheter
 from .scenarios import (BEYOND_FACTOR, CONTROLLERS, DETECT_MAX_TRAVEL, DETECT_STEP, DIAGNOSED, KNOBS, PAPER_CELLS,

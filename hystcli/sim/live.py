@@ -9,10 +9,10 @@ import numpy as np
 from scipy import signal
 
 from ..core.effects import ChainState, Effect, as_effects, format_effects
+from ..core.params import EffectSpec, Shape
+from ..core.run import Run
 from ..errors import DataError, ModelError
 from ..filters import butter_sos
-from ..core.run import Run
-from ..core.params import EffectSpec, Shape
 from .twin import CurrentState, VirtualCatheter, _knob_signals
 
 

@@ -9,10 +9,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from ..errors import DataError
-from ..core.run import Run
-from ..io import read_run
 from ..core.params import Shape
+from ..core.run import Run
+from ..errors import DataError
+from ..io import read_run
 from .calibration import CALIBRATED_NAMES, calibrated_catheter
 from .twin import VirtualCatheter, nonperiodic, periodic, simulate, sweep
 

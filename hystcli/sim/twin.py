@@ -40,11 +40,11 @@ from numba import njit
 
 from ..core import kernel
 from ..core.effects import ChainState, Effect, as_effects, contact_current, format_effects, tip_chain
-from ..errors import DataError, ModelError
-from ..filters import lowpass
-from ..core.run import Run
 from ..core.model import Model
 from ..core.params import EffectSpec, Geometry, KnobModel, Shape
+from ..core.run import Run
+from ..errors import DataError, ModelError
+from ..filters import lowpass
 from ..names import MOTIONS  # the motions simulate_motion generates (named where `--help` reads them)
 
 
