@@ -143,6 +143,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--workers", type=int, default=100, help="cluster size to project to")
     ap.add_argument("--workdir", type=Path, default=Path("/tmp/hyst-batch-bench"))
     ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--commands", default="evaluate,identify",
+                    help="which batches to time, comma-separated (the projection needs both)")
     args = ap.parse_args(argv)
     from distributed import LocalCluster
 
@@ -152,10 +154,16 @@ def main(argv: list[str] | None = None) -> int:
     res: dict = {"n": args.n, "identify_n": args.identify_n, "load_before": load}
     with LocalCluster(n_workers=2, processes=True, threads_per_worker=1, dashboard_address=":0",
                       silence_logs=50) as lc:
+        wanted = set(args.commands.split(","))
         for cmd, folder, n in (("evaluate", ev, args.n), ("identify", idf, args.identify_n)):
+            if cmd not in wanted:
+                continue
             lo, da = work / f"{cmd}_local.parquet", work / f"{cmd}_dask.parquet"
+            load_local = os.getloadavg()[0]
             t_local = batch(cmd, folder, lo, "-j", "2")
+            load_dask = os.getloadavg()[0]
             t_dask = batch(cmd, folder, da, "--scheduler", lc.scheduler_address)
+            load_end = os.getloadavg()[0]
             k = min(args.loop_n, n)
             per_run = loop(cmd, folder, k)
             peak, rss = task_memory(cmd, sorted(folder.glob("*.csv"))[0])
@@ -164,11 +172,15 @@ def main(argv: list[str] | None = None) -> int:
                         "local_runs_per_s": n / t_local, "dask_runs_per_s": n / t_dask, "loop_runs_per_s": 1 / per_run,
                         "identical": lo.read_bytes() == da.read_bytes(),
                         "task_median_s": timing_median(da), "task_peak_traced_mib": peak,
-                        "task_process_rss_mib": rss}
+                        "task_process_rss_mib": rss,
+                        # 1-minute load at the start and end of each batch: the machine the figures came from
+                        "load_1min_local_start_dask_start_end": (load_local, load_dask, load_end)}
             print(json.dumps({cmd: res[cmd]}), flush=True)
         o = overhead(lc.scheduler_address, ev, args.overhead_n)
     res["overhead_s_per_task"] = o
     for cmd in ("evaluate", "identify"):
+        if cmd not in res:
+            continue
         t = res[cmd]["task_median_s"]
         res[cmd]["projected_runs_per_s"] = min(args.workers / t, 1 / o)
         res[cmd]["projection"] = f"min({args.workers} / {t:.4f} s, 1 / {o:.5f} s)"

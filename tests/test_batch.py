@@ -255,3 +255,42 @@ def test_the_batch_commands_help_fits_80_columns():
                  ["batch", "diagnose"], ["report"]):
         text = runner.invoke(app, [*args, "--help"], terminal_width=80).stdout
         assert "Usage:" in text and max(map(len, text.splitlines())) <= 80, args
+
+
+def test_diagnose_sessions_by_a_metadata_key_across_folders(tmp_path):
+    # two robots' runs mixed in one folder: only robot "a" has the tracker's 0.3 s latency, so a
+    # session per robot finds it on a's rows alone; a run without the key is a row saying so
+    from hystcli import effects as E
+    from hystcli.io import save_model, write_run as save_run
+    from hystcli.model import Model, Shape
+    from hystcli.sim import twin
+
+    cat = twin.get_catheter("example-a")
+    save_model(tmp_path / "model.json", Model(cat.knobs, cat.geometry, meta={"catheter": "example-a"}))
+    d = tmp_path / "runs"
+    d.mkdir()
+    t = np.arange(0, 20.0 + 1e-9, 0.02)
+    shapes = ["straight", "alpha=90,theta=0", "alpha=45,theta=0"]
+    for robot, effects in (("a", (E.make_effect("latency", delay=0.3),)), ("b", ())):
+        for i, shape in enumerate(shapes):
+            q = {1: 50 * np.sin(2 * np.pi * (0.05 + 0.01 * i) * t)}
+            meta = {"motion": "periodic", "trial": i + 1, "robot": robot}
+            save_run(d / f"{robot}{i}.csv", twin.simulate(cat, t, q, shape=Shape.parse(shape), effects=effects,
+                                                          seed=i, meta=meta))
+    save_run(d / "nokey.csv", twin.simulate(cat, t, {1: 40 * np.sin(0.3 * t)}, seed=9))
+    out = tmp_path / "diag.parquet"
+    res = runner.invoke(app, ["batch", "diagnose", str(d / "*.csv"), "-m", str(tmp_path / "model.json"),
+                              "--candidates", "latency", "--session-by", "robot", "-o", str(out), "-j", "1",
+                              "-q", "-f", "json"])
+    assert res.exit_code == 0, res.output
+    table = {Path(r["path"]).stem: r for r in pq.read_table(out).to_pylist()}
+    assert len(table) == 7
+    assert table["nokey"]["status"] == "refused" and "'# robot: ...'" in table["nokey"]["reason"]
+    assert table["nokey"]["sha256"] == hashlib.sha256((d / "nokey.csv").read_bytes()).hexdigest()
+    for robot, top in (("a", "latency"), ("b", "none")):
+        group = [table[f"{robot}{i}"] for i in range(3)]
+        assert {r["session"] for r in group} == {f"robot={robot}"}
+        assert {r["status"] for r in group} == {"ok"}, group
+        assert {r["top_effect"] for r in group} == {top}
+        assert len({r["key"] for r in group}) == 1  # one diagnosis per session
+    assert json.loads(res.stdout)["failed"] == 1

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any, Callable, Sequence
 
 from .. import DataError
+from ..io.runs import read_meta
 from . import table as T
 from .engine import Job, make_engine
 from .tasks import COMMANDS, NEEDS_MODEL, Payload, canonical_settings, execute
@@ -30,7 +31,8 @@ ProgressFn = Callable[[str, int, int], None]
 class Entry:
     """One run of the batch: one row of the table.
 
-    ``sha256`` is None (and ``reason`` says why) for a file that cannot be read at all.
+    ``sha256`` is None (and ``reason`` says why) for a file that cannot be read at all; a run
+    that is read but cannot be placed (a diagnose session key it lacks) keeps its hash and says why.
     """
 
     path: str
@@ -161,7 +163,7 @@ def read_manifest(path: Path) -> list[dict[str, str]]:
 
 
 def plan(command: str, inputs: Sequence[str] = (), manifest: Path | None = None, model: Path | None = None,
-         settings: dict[str, Any] | None = None) -> Plan:
+         settings: dict[str, Any] | None = None, session_by: str | None = None) -> Plan:
     """Expand the inputs, hash every file, group diagnose sessions, key every task.
 
     Parameters
@@ -176,6 +178,10 @@ def plan(command: str, inputs: Sequence[str] = (), manifest: Path | None = None,
         The model of every run (detect-shift, diagnose) unless the manifest names one.
     settings : dict, optional
         The command's settings (:data:`hystcli.batch.tasks.DEFAULTS`).
+    session_by : str, optional
+        diagnose: the runs whose ``# KEY: value`` metadata line has one value are one session
+        (a robot, a day, a procedure), wherever their files lie. A run without that line is a
+        row refused with the reason. Default: the manifest's ``session`` column, else the folder.
 
     Returns
     -------
@@ -222,13 +228,19 @@ def plan(command: str, inputs: Sequence[str] = (), manifest: Path | None = None,
             reason = None
         except OSError as exc:
             sha, reason = None, f"{path}: cannot read ({exc.strerror or exc})"
+        if sha is not None and session_by is not None and command == "diagnose":
+            value = read_meta(path).get(session_by, "").strip()
+            if value:
+                session = f"{session_by}={value}"
+            else:
+                reason = f"{path}: no '# {session_by}: ...' metadata line to put it in a session by"
         entries.append(Entry(path, sha, m, hash_model(m) if m else None, session if command == "diagnose" else None,
                              extra, reason))
     entries.sort(key=lambda e: e.path)
 
     groups: dict[tuple, list[Entry]] = {}
     for e in entries:
-        if e.sha256 is None:
+        if e.sha256 is None or e.reason is not None:
             continue
         gk = (e.session, e.model_sha256) if command == "diagnose" else (e.sha256, e.model_sha256)
         groups.setdefault(gk, []).append(e)

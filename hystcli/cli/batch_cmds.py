@@ -56,7 +56,7 @@ ModelReqOpt = Annotated[Optional[Path], typer.Option(
 
 def _run(command_name: str, runs: Optional[List[str]], manifest: Optional[Path], output: Path,
          settings: dict, model: Optional[Path], scheduler: Optional[str], jobs: int, retries: int,
-         strict: bool, fmt: OutputFormat, quiet: bool) -> None:
+         strict: bool, fmt: OutputFormat, quiet: bool, session_by: Optional[str] = None) -> None:
     from ..batch import require
 
     only_formats(fmt, f"batch {command_name}", OutputFormat.table, OutputFormat.json)
@@ -65,7 +65,7 @@ def _run(command_name: str, runs: Optional[List[str]], manifest: Optional[Path],
     require("pyarrow", *(("distributed",) if scheduler else ()))
     from ..batch import core
 
-    pl = core.plan(command_name, runs or [], manifest, model, settings)
+    pl = core.plan(command_name, runs or [], manifest, model, settings, session_by=session_by)
     with progress(quiet) as update:
         res = core.run_batch(pl, output, scheduler=scheduler, jobs=jobs, retries=retries,
                              progress=lambda message, done, total: update(message, done, total))
@@ -162,17 +162,20 @@ def batch_diagnose(
     max_effects: Annotated[int, typer.Option("--max-effects", min=0, help="Most effects to add.")] = 3,
     bootstrap: Annotated[int, typer.Option(min=0, help="Bootstrap resamples (0: none).")] = 0,
     seed: SeedOpt = 0,
+    session_by: Annotated[Optional[str], typer.Option("--session-by", metavar="KEY",
+                                                      help="One session per value of the runs' '# KEY:' "
+                                                           "metadata (default: per folder).")] = None,
     scheduler: SchedulerOpt = None, jobs: JobsOpt = 2, retries: RetriesOpt = 2, strict: StrictOpt = False,
     fmt: FormatOpt = OutputFormat.table, quiet: QuietOpt = False,
 ) -> None:
-    """Diagnose each session (hyst diagnose): the runs of one folder, or of one 'session' in the
-    manifest, are one diagnosis; each run's row holds the session's top effect and gap shrink and
-    its own RMSE before and after."""
+    """Diagnose each session (hyst diagnose): the runs of one folder, of one 'session' in the
+    manifest, or with one value of a metadata key (--session-by robot) are one diagnosis; each
+    run's row holds the session's top effect and gap shrink and its own RMSE before and after."""
     if model is None and manifest is None:
         usage_error("give --model (or a manifest with a model column)", "--model")
     _run("diagnose", runs, manifest, output, {"holdout": holdout, "candidates": candidates,
                                               "max_effects": max_effects, "bootstrap": bootstrap, "seed": seed},
-         model, scheduler, jobs, retries, strict, fmt, quiet)
+         model, scheduler, jobs, retries, strict, fmt, quiet, session_by=session_by)
 
 
 def _tables(rep: Any, z_limit: float) -> list[Any]:

@@ -39,6 +39,30 @@ def _parse_meta_line(line: str) -> tuple[str, str] | None:
     return key, value.strip()
 
 
+def read_meta(path: str | os.PathLike) -> dict[str, str]:
+    """The ``# key: value`` metadata of a run CSV, read from its leading comment lines only (the
+    rows are not read): what a batch groups runs by before any worker parses them.
+
+    Raises
+    ------
+    DataError
+        The file cannot be read.
+    """
+    meta: dict[str, str] = {}
+    try:
+        with open(path, encoding="utf-8", errors="replace") as f:
+            for line in f:
+                if line.startswith("#"):
+                    kv = _parse_meta_line(line.rstrip("\n"))
+                    if kv is not None:
+                        meta[kv[0]] = kv[1]
+                elif line.strip():
+                    break  # the header: metadata only comes before it
+    except OSError as exc:
+        raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
+    return meta
+
+
 READ_PROGRESS_BYTES = 16 * 2**20
 """Files at least this big report their reading to a ``progress`` callback (:func:`read_run`): a
 smaller one reads in a fraction of a second."""
