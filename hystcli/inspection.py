@@ -7,8 +7,8 @@ what identification learnt from the current (the slopes and level ``detect-shift
 effects ``diagnose`` added, the geometry. Two models of one catheter (straight against shifted,
 before against after diagnosis) differ in a few of these: :func:`diff_table` lines them up.
 
-Everything here returns plain data (:class:`hystcli.report.table.Table`, dicts) or figure bytes; the
-command line renders it.
+Everything here returns plain data (:class:`hystcli.report.table.Table`, dicts) or a matplotlib
+Figure; the command line renders and saves it.
 """
 from __future__ import annotations
 
@@ -16,8 +16,6 @@ from typing import Any, Sequence
 
 from .core.model import Model
 from .core.params import KnobIdentification, KnobModel, PARAM_NAMES
-from .errors import DataError
-from .report.figures import PLOT_FORMATS, figure_bytes
 from .report.table import Table
 
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")
@@ -138,33 +136,32 @@ def changed_rows(table: Table, tol: float = 1e-12) -> Table:
     return Table(table.columns, table.headers, keep, table.notes)
 
 
-def envelope_figure(model: Model, fmt: str = "png", q_range: Sequence[float] | None = None) -> bytes:
-    """Each knob's two envelopes against the knob angle, shifted by its offset, as file bytes.
+def envelope_figure(model: Model, q_range: Sequence[float] | None = None):  # noqa: ANN201 - matplotlib Figure
+    """Each knob's two envelopes against the knob angle, shifted by its offset (``hyst show --plot``).
 
     The ascending envelope ``f_up`` (loading: lines L2-L4) and the descending ``f_dn``
     (unloading: L8-L6) of docs/design.md section 3, with the shifted dead-zone edges and the far edges
-    marked; between them lies every state the knob can hold. Drawn with matplotlib's ``Figure``
-    API (no global backend switch).
+    marked; between them lies every state the knob can hold.
 
     Parameters
     ----------
     model : Model
-    fmt : str
-        ``png``, ``pdf`` or ``svg``.
     q_range : (float, float), optional
         Knob angles to draw (deg); default the identified range widened to show both edges.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        In the style of :mod:`hystcli.report.style`; :func:`hystcli.report.figures.save_figure`
+        writes it.
     """
     import numpy as np
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
 
-    if fmt not in PLOT_FORMATS:
-        raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")
+    from .report import style
+
     ks = list(model.knobs)
-    fig = Figure(figsize=(5.5 * len(ks), 4.6), dpi=100)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(1, len(ks), squeeze=False)[0]
-    for ax, k in zip(axes, ks):
+    fig, axes = style.new_figure(1, len(ks))
+    for ax, k in zip(axes[0], ks):
         knob = model.knobs[k]
         edges = [knob.shifted_d_neg, knob.shifted_d_pos, knob.dhat_pos + knob.offset, knob.dhat_neg + knob.offset]
         ident = model.identification.get(k)
@@ -175,22 +172,20 @@ def envelope_figure(model: Model, fmt: str = "png", q_range: Sequence[float] | N
             hi = max(edges + ([ident.q_max] if ident else [])) + 15.0
         q = np.linspace(lo, hi, 801)
         u = q - knob.offset
-        ax.plot(q, knob.f_up(u), color="tab:red", lw=1.5, label="f_up (loading)")
-        ax.plot(q, knob.f_dn(u), color="tab:blue", lw=1.5, label="f_dn (unloading)")
-        ax.fill_between(q, knob.f_up(u), knob.f_dn(u), color="0.9", label="states the knob can hold")
-        ax.axvline(knob.shifted_d_neg, color="0.3", lw=0.8, ls="--", label="dead-zone edges d~_neg, d~_pos")
-        ax.axvline(knob.shifted_d_pos, color="0.3", lw=0.8, ls="--")
+        ax.plot(q, knob.f_up(u), **style.line("loading"), label="f_up (loading)")
+        ax.plot(q, knob.f_dn(u), **style.line("unloading"), label="f_dn (unloading)")
+        ax.fill_between(q, knob.f_up(u), knob.f_dn(u), **style.band("region"), label="states the knob can hold")
+        ax.axvline(knob.shifted_d_neg, **style.line("edge"), label="dead-zone edges d~_neg, d~_pos")
+        ax.axvline(knob.shifted_d_pos, **style.line("edge"))
         ax.set_xlabel(f"knob angle q{k} (deg)")
         ax.set_ylabel(f"tip angle y{k} (deg)")
         unfixed_b = [n for n in ("b_neg", "b_pos") if ident is not None and n in ident.unfixed]
-        ax.set_title(f"knob {k}: d {knob.d_neg:.2f} / {knob.d_pos:.2f}, b {knob.b_neg:.2f} / {knob.b_pos:.2f}, "
-                     f"omega {knob.omega:.3f}, offset {knob.offset:+.2f}"
-                     + (f"\n{' and '.join(unfixed_b)} not fixed by the sweep: drawn as 0" if unfixed_b else ""),
-                     fontsize=8)
-        ax.grid(True, lw=0.3)
-        ax.legend(fontsize=7, loc="upper left")
-    fig.tight_layout()
-    return figure_bytes(fig, fmt)
+        style.title(ax, f"knob {k}: d {knob.d_neg:.2f} / {knob.d_pos:.2f}, b {knob.b_neg:.2f} / {knob.b_pos:.2f},\n"
+                        f"omega {knob.omega:.3f}, offset {knob.offset:+.2f}"
+                    + (f"\n{' and '.join(unfixed_b)} not fixed by the sweep: drawn as 0" if unfixed_b else ""))
+        style.legend(ax, loc="upper left")
+    style.finish(fig)
+    return fig
 
 
 __all__ = ["DERIVED", "changed_rows", "diff_table", "effects_table", "envelope_figure", "identification_table",

@@ -260,9 +260,10 @@ def test_the_batch_commands_help_fits_80_columns():
 def test_diagnose_sessions_by_a_metadata_key_across_folders(tmp_path):
     # two robots' runs mixed in one folder: only robot "a" has the tracker's 0.3 s latency, so a
     # session per robot finds it on a's rows alone; a run without the key is a row saying so
-    from hystcli import effects as E
+    from hystcli.core import effects as E
+    from hystcli.core.model import Model
+    from hystcli.core.params import Shape
     from hystcli.io import save_model, write_run as save_run
-    from hystcli.model import Model, Shape
     from hystcli.sim import twin
 
     cat = twin.get_catheter("example-a")

@@ -237,26 +237,25 @@ def report(df: Any, by: str | None = None, time: str | None = None, values: Sequ
 
 def drift_figure(df: Any, time: str, values: Sequence[str], by: str | None = None) -> Any:
     """Each value against the time column (one panel per value, one line per group): a
-    matplotlib Figure, for the caller to save."""
-    # a Figure of its own, not pyplot's: no backend chosen, no global state touched
-    from matplotlib.figure import Figure
+    matplotlib Figure in the style of :mod:`hystcli.report.style`, for the caller to save
+    (:func:`hystcli.report.figures.save_figure`)."""
+    from ..report import style
 
     ok = df[df["status"] == "ok"]
     axis, unit = _time_axis(ok[time])
     n = max(1, len(values))
-    fig = Figure(figsize=(7, 2.2 * n + 0.6))
-    axes = fig.subplots(n, 1, sharex=True, squeeze=False)
+    fig, axes = style.new_figure(n, 1, sharex=True)
     groups = _groups(ok, by)
     for ax, c in zip(axes[:, 0], values):
-        for g, d in groups:
+        for i, (g, d) in enumerate(groups):
             sel = d[c].notna()
             t = axis.loc[d.index][sel]
             order = t.sort_values(kind="mergesort").index
-            ax.plot(axis.loc[order], d.loc[order, c], marker="o", ms=3, lw=1, label=str(g))
+            ax.plot(axis.loc[order], d.loc[order, c], marker="o", ms=style.MARKER_SIZE,
+                    **style.line("measured", color=style.series_colour(i)), label=str(g))
         ax.set_ylabel(c)
-        ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel(f"{time} ({'days since the first' if unit == 'per day' else 'value'})")
     if by is not None and len(groups) <= 12:
-        axes[0, 0].legend(fontsize=7, title=by, title_fontsize=7)
-    fig.tight_layout()
+        style.legend(axes[0, 0], title=by, title_fontsize=style.LEGEND_SIZE)
+    style.finish(fig)
     return fig

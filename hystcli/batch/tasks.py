@@ -304,15 +304,5 @@ def text_table(columns: Sequence[str], headers: Sequence[str], rows: Sequence[tu
     return Table(tuple(columns), tuple(headers), tuple(rows), tuple(notes))
 
 
-def write_figure(fig: Any, path: Any, inputs: Sequence[Any] = ()) -> None:
-    """Save a matplotlib Figure atomically (hyst's own writer: never over an input, never half a file)."""
-    from pathlib import Path
-
-    from ..io import atomic_write
-
-    fmt = Path(path).suffix.lower().lstrip(".") or "png"
-    atomic_write(path, lambda f: fig.savefig(f, format=fmt, dpi=120), inputs=inputs)
-
-
 _SINGLE: dict[str, Callable[..., dict]] = {"identify": _identify, "evaluate": _evaluate,
                                            "detect-shift": _detect_shift}

@@ -234,9 +234,9 @@ def report_cmd(
     df = read_table(table)
     rep = report(df, by=by, time=time, values=value or (), z_limit=z)
     if output is not None:
-        from ..batch.tasks import write_figure
+        from ..report.figures import save_figure
 
-        write_figure(drift_figure(df, time, rep.values, by), output, inputs=[table])
+        save_figure(drift_figure(df, time, rep.values, by), output, inputs=[table])
         info(f"wrote {output}", quiet)
     if fmt == OutputFormat.json:
         echo_json(rep.to_dict())

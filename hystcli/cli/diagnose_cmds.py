@@ -50,7 +50,7 @@ def diagnose_cmd(
     """
     from .. import io
     from ..check import require_shape
-    from ..diagnosis import diagnose, diagnosis_figure
+    from ..diagnosis import diagnose
     from ..core.effects import EFFECTS
 
     only_formats(fmt, "diagnose", OutputFormat.table, OutputFormat.json)
@@ -81,7 +81,7 @@ def diagnose_cmd(
                         bootstrap=bootstrap, seed=seed, progress=update, sweep=sweep_run)
     report = diag.report()
     report["model"] = str(model_path)
-    png = diagnosis_figure(diag, loaded) if plot is not None else None
+    figure = diag.plot(loaded) if plot is not None else None
     with io.all_or_none() as pending:
         if output is not None:
             pending.write_text(output, json.dumps(report, indent=2, allow_nan=False) + "\n", inputs=inputs)
@@ -89,8 +89,10 @@ def diagnose_cmd(
             meta = dict(diag.model.meta)
             meta["diagnosed_on"] = ", ".join(Path(p).name for p in runs)
             pending.write_text(model_out, io.dumps_model(replace(diag.model, meta=meta)), inputs=inputs)
-        if png is not None:
-            pending.write_bytes(plot, png, inputs=inputs)
+        if figure is not None:
+            from ..report.figures import save_figure
+
+            save_figure(figure, pending.path(plot, inputs=inputs), fmt="png")
     if quiet:
         return
     if fmt == OutputFormat.json:

@@ -32,9 +32,10 @@ def show_cmd(
     if plot is not None:
         io.check_not_input(plot, [model_path])
     model = io.load_model(model_path)
-    png = inspection.envelope_figure(model, plot.suffix.lower().lstrip(".")) if plot is not None else None
-    if png is not None:
-        io.atomic_write(plot, lambda f: f.write(png), inputs=[model_path])
+    if plot is not None:
+        from ..report.figures import save_figure
+
+        save_figure(inspection.envelope_figure(model), plot, inputs=[model_path])
     if not prints(fmt, quiet):
         return
     if fmt == OutputFormat.json:

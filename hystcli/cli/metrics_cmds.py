@@ -11,7 +11,7 @@ from typing import Annotated, Optional
 import typer
 
 from .. import metrics  # numpy only: the grouping fields and plot formats name the options
-from ..report.figures import PLOT_FORMATS
+from ..report.figures import PLOT_FORMATS, save_figure
 from .app import (ColumnsOpt, FormatOpt, OutputFormat, PlotOpt, QuietOpt, columns_mapping, command, distinct_inputs,
                   distinct_outputs, info, load_run, option_errors, prints, usage_error, warn)
 
@@ -68,9 +68,7 @@ def evaluate(
     loaded = [require_shape(load_run(p, mapping, quiet=quiet)) for p in runs]
     evaluation = metrics.evaluate_runs(loaded, group_by=metrics.parse_group_by(group_by))
     text = metrics.render(evaluation, fmt.value, per_run=per_run)
-    from ..metrics import evaluation_figure
-
-    png = evaluation_figure(loaded, plot.suffix.lower().lstrip(".")) if plot is not None else None
+    figure = evaluation.plot(loaded) if plot is not None else None
 
     if not quiet:
         for w in evaluation.warnings:
@@ -80,8 +78,8 @@ def evaluate(
     with all_or_none() as pending:
         if output is not None:
             pending.write_text(output, text, inputs=runs)
-        if png is not None:
-            pending.write_bytes(plot, png, inputs=runs)
+        if figure is not None:
+            save_figure(figure, pending.path(plot, inputs=runs))
     if output is None and prints(fmt, quiet):
         typer.echo(text, nl=False)
     for path in (output, plot):

@@ -9,13 +9,10 @@ from .result import Diagnosis
 
 
 def diagnosis_figure(diag: Diagnosis, runs: Sequence[Run]) -> bytes:
-    """PNG bytes of :func:`diagnosis_axes`' figure."""
-    import io as _io
+    """PNG bytes of :func:`diagnosis_axes`' figure, the same bytes for the same diagnosis."""
+    from ..report.figures import figure_bytes
 
-    fig = diagnosis_axes(diag, runs)
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100)
-    return buf.getvalue()
+    return figure_bytes(diagnosis_axes(diag, runs), "png")
 
 
 def diagnosis_axes(diag: Diagnosis, runs: Sequence[Run]):  # noqa: ANN201 - matplotlib.figure.Figure

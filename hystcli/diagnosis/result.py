@@ -247,31 +247,31 @@ class Diagnosis:
         matplotlib.figure.Figure
             What ``hyst diagnose --plot`` saves.
         """
-        from matplotlib.figure import Figure
+        from ..report import style
 
-        fig = Figure(figsize=(12, 8.5))
-        axes = fig.subplots(2, 2)
+        fig, axes = style.new_figure(2, 2)
         for ax, factor in zip(axes.flat[:2], ("phase", "speed")):
             gs = self.where.factor(factor)
             x = np.arange(len(gs))
-            ax.bar(x - 0.2, [100 * g.sample_share for g in gs], 0.4, label="samples")
-            ax.bar(x + 0.2, [100 * g.energy_share for g in gs], 0.4, label="residual energy")
-            ax.set_xticks(x, [g.level for g in gs], rotation=20, fontsize=8)
+            ax.bar(x - 0.2, [100 * g.sample_share for g in gs], 0.4, color=style.series_colour(0), label="samples")
+            ax.bar(x + 0.2, [100 * g.energy_share for g in gs], 0.4, color=style.series_colour(1),
+                   label="residual energy")
+            ax.set_xticks(x, [g.level for g in gs], rotation=20)
             ax.set_ylim(0, 100)
             ax.set_ylabel("share (%)")
-            ax.set_title(f"residual by {factor}", fontsize=10)
-            ax.legend(fontsize=8)
+            style.title(ax, f"residual by {factor}")
+            style.legend(ax)
         ax = axes.flat[2]
         follows = list(self.where.follows)
         if follows:
             y = np.arange(len(follows))
-            bars = ax.barh(y, [max(a.explained_pct, 0.0) for a in follows], color="tab:green")
-            ax.bar_label(bars, [f"{a.explained_pct:.1f} %" for a in follows], padding=3, fontsize=8)
-            ax.set_yticks(y, [a.regressor for a in follows], fontsize=8)
+            bars = ax.barh(y, [max(a.explained_pct, 0.0) for a in follows], color=style.series_colour(2))
+            ax.bar_label(bars, [f"{a.explained_pct:.1f} %" for a in follows], padding=3, fontsize=style.NOTE_SIZE)
+            ax.set_yticks(y, [a.regressor for a in follows])
             ax.invert_yaxis()
         ax.set_xlim(0, 100)
         ax.set_xlabel("residual energy explained, held out (%)")
-        ax.set_title("what the base model's residual follows", fontsize=10)
+        style.title(ax, "what the base model's residual follows")
         ax = axes.flat[3]
         if self.how_far.per_run:
             best = max(self.how_far.per_run, key=lambda f: f.rmse_before - f.rmse_after)
@@ -282,18 +282,18 @@ class Diagnosis:
             before = E.predict(base_model, run)[best.knob]
             after = E.predict(self.model, run)[best.knob]
             t = run.t
-            ax.plot(t, run[f"y{best.knob}"], "k", lw=1, label="measured")
-            ax.plot(t, before, lw=1, label=f"model (RMSE {best.rmse_before:.2f} deg)")
-            ax.plot(t, after, lw=1, label=f"+ effects (RMSE {best.rmse_after:.2f} deg)")
+            ax.plot(t, run[f"y{best.knob}"], **style.line("measured"), label="measured")
+            ax.plot(t, before, **style.line("model"), label=f"model (RMSE {best.rmse_before:.2f} deg)")
+            ax.plot(t, after, **style.line("augmented"), label=f"+ effects (RMSE {best.rmse_after:.2f} deg)")
             ax.set_xlabel("time t (s)")
             ax.set_ylabel(f"tip angle y{best.knob} (deg)")
-            name = best.run if len(best.run) < 50 else "..." + best.run[-47:]
-            ax.set_title(f"held out: {name}", fontsize=9)
-            ax.legend(fontsize=8)
+            name = best.run if len(best.run) < 40 else "..." + best.run[-37:]
+            style.title(ax, f"held out: {name}")
+            style.legend(ax)
         # the verdict, wrapped to the figure's width (a long one is cut after three lines)
-        lines = textwrap.wrap(self.verdict, 150)
-        fig.suptitle("\n".join(lines[:3]) + (" ..." if len(lines) > 3 else ""), fontsize=9)
-        fig.tight_layout(rect=(0, 0, 1, 0.93))
+        lines = textwrap.wrap(self.verdict, 110)
+        fig.suptitle("\n".join(lines[:3]) + (" ..." if len(lines) > 3 else ""), fontsize=style.SUPTITLE_SIZE)
+        style.finish(fig)
         return fig
 
     @property

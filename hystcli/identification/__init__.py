@@ -126,7 +126,7 @@ class Identification:
         -------
         matplotlib.figure.Figure
             What ``hyst identify --plot`` saves (:func:`identification_figure`); save it with
-            ``fig.savefig(path)``.
+            :func:`hystcli.report.figures.save_figure`.
         """
         return identification_figure(run, self)
 
@@ -413,11 +413,9 @@ def current_levels(run: Run, knob: int, model: KnobModel, settings: Settings = D
 # --------------------------------------------------------------------------------------------
 def plot_identification(run: Run, result: Identification, path) -> None:  # noqa: ANN001
     """:func:`identification_figure` written atomically to ``path`` as PNG (``hyst identify --plot``)."""
-    from ..io import atomic_write
-    from ..report.figures import figure_bytes
+    from ..report.figures import save_figure
 
-    data = figure_bytes(identification_figure(run, result), "png")
-    atomic_write(path, lambda f: f.write(data))
+    save_figure(identification_figure(run, result), path, fmt="png")
 
 
 def identification_figure(run: Run, result: Identification):  # noqa: ANN201 - matplotlib.figure.Figure
@@ -438,11 +436,10 @@ def identification_figure(run: Run, result: Identification):  # noqa: ANN201 - m
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.figure import Figure
+    from ..report import style
 
     ks = sorted(result.fits)
-    fig = Figure(figsize=(11, 4.2 * len(ks)))
-    axes = fig.subplots(len(ks), 2, squeeze=False)
+    fig, axes = style.new_figure(len(ks), 2)
     for row, k in zip(axes, ks):
         fit = result.fits[k]
         m = fit.model
@@ -451,30 +448,31 @@ def identification_figure(run: Run, result: Identification):  # noqa: ANN201 - m
         y0 = float(run[f"y{k}"][0]) if has_y else 0.0
         ax = row[0]
         if has_y:
-            ax.plot(q, run[f"y{k}"], color="0.6", lw=1.0, label="measured")
-        ax.plot(q, m.forward(q, y0), color="C3", lw=1.2, label=f"model ({fit.method})")
+            ax.plot(q, run[f"y{k}"], **style.line("measured"), label="measured")
+        ax.plot(q, m.forward(q, y0), **style.line("model"), label=f"model ({fit.method})")
         ax.set_xlabel(f"knob angle q{k} (deg)")
         ax.set_ylabel(f"tip angle y{k} (deg)")
-        title = (f"knob {k}: d_pos={m.d_pos:.2f} d_neg={m.d_neg:.2f} b_pos={m.b_pos:.2f} "
+        title = (f"knob {k}: d_pos={m.d_pos:.2f} d_neg={m.d_neg:.2f} b_pos={m.b_pos:.2f}\n"
                  f"b_neg={m.b_neg:.2f} omega={m.omega:.3f}")
         if fit.rmse is not None:
             title += f"  RMSE={fit.rmse:.2f} deg"
-        ax.set_title(title, fontsize=9)
+        style.title(ax, title)
         ax2 = row[1]
         if f"c{k}" in run:
-            ax2.plot(q, run[f"c{k}"], color="0.6", lw=1.0, label="measured")
+            ax2.plot(q, run[f"c{k}"], **style.line("measured"), label="measured")
             if fit.current is not None:
                 for side, e in fit.current.edges.items():
                     ax2.axvspan(e.lo if math.isfinite(e.lo) else e.value, e.hi if math.isfinite(e.hi) else e.value,
-                                color="C1", alpha=0.3, label="tendon taken up (current)" if side == "pos" else None)
+                                **style.band("interval"),
+                                label="tendon taken up (current)" if side == "pos" else None)
         else:
-            ax2.text(0.5, 0.5, "no motor current recorded", ha="center", va="center", transform=ax2.transAxes)
+            ax2.text(0.5, 0.5, "no motor current recorded", ha="center", va="center", transform=ax2.transAxes,
+                     fontsize=style.NOTE_SIZE)
         ax2.set_xlabel(f"knob angle q{k} (deg)")
         ax2.set_ylabel(f"motor current c{k} (mA)")
         for a in (ax, ax2):
-            a.axvline(m.d_pos, color="C0", lw=1.0, label="dead-zone edges d_neg, d_pos")
-            a.axvline(m.d_neg, color="C0", lw=1.0)
-            a.grid(alpha=0.3)
-            a.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
+            a.axvline(m.d_pos, **style.line("edge"), label="dead-zone edges d_neg, d_pos")
+            a.axvline(m.d_neg, **style.line("edge"))
+            style.legend(a, loc="upper left")
+    style.finish(fig)
     return fig

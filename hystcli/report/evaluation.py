@@ -11,20 +11,7 @@ from typing import Sequence
 import numpy as np
 
 from ..core.run import Run
-
-#: The paper's colours (Figs. 6 and 7); other controllers take the next colours of this list.
-CONTROLLER_COLOURS = {"none": "tab:blue", "comp": "tab:red", "comp+shift": "tab:green"}
-_EXTRA_COLOURS = ("tab:orange", "tab:purple", "tab:brown", "tab:pink", "tab:olive", "tab:cyan")
-GROUND_TRUTH_COLOUR = "black"
-
-
-def _controller_colour(name: str, extra: dict[str, str]) -> str:
-    if name in CONTROLLER_COLOURS:
-        return CONTROLLER_COLOURS[name]
-    if name not in extra:
-        extra[name] = _EXTRA_COLOURS[len(extra) % len(_EXTRA_COLOURS)]
-    return extra[name]
-
+from . import style
 
 PLOT_POINTS = 4000
 """Samples per drawn line at most: a 420-pixel panel shows no more, and Agg renders 10 000-sample
@@ -50,9 +37,9 @@ def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figur
     :func:`hystcli.metrics.evaluation_figure`'s).
 
     One column per (motion, shape, knob); in it, for each controller, one run; top: ``r`` (ground
-    truth, black) and each controller's ``y`` against time; bottom: ``y`` against the input
-    ``r``, with the ideal ``y = r`` in black. Colours are the paper's: none blue, comp red,
-    comp+shift green.
+    truth, the style's reference) and each controller's ``y`` against time; bottom: ``y`` against
+    the input ``r``, with the ideal ``y = r`` as reference. Colours are the paper's
+    (:data:`.style.CONTROLLER_COLOURS`): none blue, comp red, comp+shift green.
 
     Parameters
     ----------
@@ -64,15 +51,10 @@ def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figur
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     order = [c for c, _ in columns]
     motions = {c[0] for c in order}
 
-    fig = Figure(figsize=(4.2 * len(order), 7.0), dpi=100)
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(2, len(order), squeeze=False)
+    fig, axes = style.new_figure(2, len(order))
     extra: dict[str, str] = {}
     for j, ckey in enumerate(order):
         motion, shape, k = ckey
@@ -82,26 +64,21 @@ def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figur
         top, bottom = axes[0][j], axes[1][j]
         ref = by_ctrl[ctrls[0]]
         # ground truth drawn last and dashed, so a controller that tracks it perfectly hides nothing
-        top.plot(*_thin(ref.t, ref[f"r{k}"]), color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
-                 label="ground truth (r)")
+        top.plot(*_thin(ref.t, ref[f"r{k}"]), **style.line("reference"), zorder=3, label="ground truth (r)")
         lo = min(float(np.min(by_ctrl[c][f"r{k}"])) for c in ctrls)
         hi = max(float(np.max(by_ctrl[c][f"r{k}"])) for c in ctrls)
-        bottom.plot([lo, hi], [lo, hi], color=GROUND_TRUTH_COLOUR, lw=1.0, ls="--", zorder=3,
-                    label="ground truth (y = r)")
+        bottom.plot([lo, hi], [lo, hi], **style.line("reference"), zorder=3, label="ground truth (y = r)")
         for c in ctrls:
             run = by_ctrl[c]
-            colour = _controller_colour(c, extra)
+            colour = style.controller_colour(c, extra)
             label = labels[c]
-            top.plot(*_thin(run.t, run[f"y{k}"]), color=colour, lw=1.4, label=label)
-            bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), color=colour, lw=1.4, label=label)
-        title = f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else "")
-        top.set_title(title, fontsize=9)
+            top.plot(*_thin(run.t, run[f"y{k}"]), **style.line("measured", color=colour), label=label)
+            bottom.plot(*_thin(run[f"r{k}"], run[f"y{k}"]), **style.line("measured", color=colour), label=label)
+        style.title(top, f"{shape}, knob {k}" + (f", {motion}" if len(motions) > 1 else ""))
         top.set_xlabel("time (s)")
         top.set_ylabel(f"output angle y{k} (deg)")
         bottom.set_xlabel(f"input angle r{k} (deg)")
         bottom.set_ylabel(f"output angle y{k} (deg)")
-        for ax in (top, bottom):
-            ax.grid(True, lw=0.3)
     # one legend for the whole figure: the first column (often the straight shaft) lacks the
     # controllers that only the bent shapes run (Compensation+Shift, the diagnosed one)
     legend: dict[str, object] = {}
@@ -111,15 +88,13 @@ def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figur
     width, height = fig.get_size_inches()
     ncol = min(len(legend), 5, max(2, int(width // 2.4)))   # a label is about 2.4 in wide
     rows = -(-len(legend) // ncol)
-    fig.legend(list(legend.values()), list(legend), loc="lower center", ncol=ncol,
-               fontsize=8, frameon=False)
+    style.legend(fig, list(legend.values()), list(legend), ncol=ncol)
     # fixed margins in inches rather than tight_layout, which draws the whole figure once more
     # just to measure its labels (a second of the demo)
+    panel_w, panel_h = style.PANEL_SIZE
     fig.subplots_adjust(left=0.75 / width, right=1.0 - 0.15 / width, bottom=(0.75 + 0.2 * rows) / height,
-                        top=1.0 - 0.3 / height, wspace=0.85 / 4.2 / 0.8, hspace=0.65 / 3.0)
+                        top=1.0 - 0.3 / height, wspace=0.85 / panel_w / 0.8, hspace=0.65 / (panel_h - 0.5))
     return fig
 
 
-
-
-__all__ = ["CONTROLLER_COLOURS", "evaluation_axes"]
+__all__ = ["evaluation_axes"]

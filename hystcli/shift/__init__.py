@@ -61,9 +61,7 @@ def plot_shift(results: Sequence[ShiftResult], path: str | os.PathLike, model: "
     inputs : iterable of path-like
         The command's inputs, never overwritten.
     """
-    from ..io import atomic_write
-    from ..report.figures import figure_bytes
+    from ..report.figures import save_figure
     from .figure import shift_figure
 
-    data = figure_bytes(shift_figure(results, model, background), "png")
-    atomic_write(path, lambda f: f.write(data), inputs=inputs)
+    save_figure(shift_figure(results, model, background), path, inputs=inputs, fmt="png")

@@ -27,38 +27,37 @@ def shift_figure(results: Sequence, model: "Model | None" = None,
     -------
     matplotlib.figure.Figure
     """
-    from matplotlib.figure import Figure
+    from ..report import style
 
     results = list(results)
     if not results:
         raise ShiftDetectionError("nothing to plot: no knob was searched")
-    fig = Figure(figsize=(5.5 * len(results), 4.0))
-    axes = fig.subplots(1, len(results), squeeze=False)
+    fig, axes = style.new_figure(1, len(results))
     for ax, r in zip(axes[0], results):
         if background and r.knob in background:
             bq, bc = background[r.knob]
-            ax.plot(bq, bc, color="0.8", lw=0.8, label="record")
+            ax.plot(bq, bc, **style.line("background"), label="record")
         tq = np.array([p[0] for p in r.trace])
         tc = np.array([p[1] for p in r.trace])
-        ax.plot(tq, tc, ".-", color="tab:blue", ms=3, lw=0.8, label="search steps")
-        ax.axvspan(r.d_neg, r.d_pos, color="tab:green", alpha=0.12,
-                   label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
+        ax.plot(tq, tc, **style.line("measured", linewidth=style.THIN_WIDTH), marker=".", ms=style.MARKER_SIZE,
+                label="search steps")
+        ax.axvspan(r.d_neg, r.d_pos, **style.band("shifted"), label=f"new dead zone [{r.d_neg:.1f}, {r.d_pos:.1f}]")
         if model is not None and r.knob in model.knobs:
             km = model.knob(r.knob)
-            for d in (km.d_neg, km.d_pos):
-                ax.axvline(d, color="0.4", ls=":", lw=1)
+            for i, d in enumerate((km.d_neg, km.d_pos)):
+                ax.axvline(d, **style.line("edge"), label=None if i else "straight-shaft edges")
         edge_c = float(np.interp(r.edge_found_at, *_sorted(tq, tc))) if tq.size else 0.0
-        ax.plot([r.edge_found_at], [edge_c], "o", color="tab:red", ms=8,
+        ax.plot([r.edge_found_at], [edge_c], "o", color=style.COLOURS["shifted"], ms=style.EDGE_MARKER_SIZE,
                 label=f"edge {r.edge} at {r.edge_found_at:.2f} deg")
         if r.evidence is not None:
-            ax.axvspan(r.evidence.edge_lo, r.evidence.edge_hi, color="tab:red", alpha=0.15)
-        for cq in r.contacts:
-            ax.axvline(cq, color="tab:orange", ls="--", lw=1)
+            ax.axvspan(r.evidence.edge_lo, r.evidence.edge_hi, **style.band("interval"), label="edge interval")
+        for i, cq in enumerate(r.contacts):
+            ax.axvline(cq, **style.line("warning"), label=None if i else "contact")
         ax.set_xlabel(f"knob {r.knob} angle (deg)")
         ax.set_ylabel("motor current (mA)")
-        ax.set_title(f"knob {r.knob}: offset {r.offset:+.2f} deg [{r.offset_lo:+.2f}, {r.offset_hi:+.2f}]")
-        ax.legend(fontsize=7, loc="best")
-    fig.tight_layout()
+        style.title(ax, f"knob {r.knob}: offset {r.offset:+.2f} deg [{r.offset_lo:+.2f}, {r.offset_hi:+.2f}]")
+        style.legend(ax)
+    style.finish(fig)
     return fig
 
 
