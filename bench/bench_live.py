@@ -48,9 +48,11 @@ from hystcli.device import (DEFAULT_DWELL, DEFAULT_MEAN, Device, DeviceProbe, de
                             encode_frame, open_probe)
 from hystcli.device.emulator import DeviceEmulator
 from hystcli.core.model import Model
-from hystcli.core.params import KnobIdentification, Shape
+from hystcli.core.params import Shape
 from hystcli.shift import detect_shift
+from hystcli.sim.experiment import identify_catheter
 from hystcli.sim.live import LiveTwin
+from hystcli.sim.scenarios import record_sweep
 
 N = 3000
 SHAPES = ("straight", "alpha=45,theta=0", "alpha=90,theta=180", "alpha=45,theta=0;alpha=45,theta=90")
@@ -84,11 +86,10 @@ class DirectPort:
 
 
 def identified_model(cat) -> Model:
-    """The catheter's straight-shaft model with the identification `hyst identify` stores for
-    detect-shift (dead-zone slope ~0.5 mA/deg, loaded k_load, dead-zone current = no-load)."""
-    ident = {k: KnobIdentification(slope_dead_zone=0.5, slope_loaded=cat.current.k_load, q_min=-40.0,
-                                   q_max=40.0, current_dead_zone=cat.current.no_load) for k in (1, 2)}
-    return Model(dict(cat.knobs), cat.geometry, identification=ident)
+    """The catheter's straight-shaft model as the paper identifies it (``hyst demo``'s path): one
+    recorded sweep per knob through identification, so detect-shift reads the calibration record
+    a user's model file would hold."""
+    return identify_catheter({k: record_sweep(cat, k) for k in (1, 2)}, cat.name)
 
 
 def direct_device(cat, shape: str = "straight", effects=None, seed: int = 0) -> tuple[Device, DirectPort]:
