@@ -43,9 +43,11 @@ imports neither typer, rich nor matplotlib.
    (:mod:`hystcli.core.params`), the run a model works on (:mod:`hystcli.core.run`), the effects and
    their chain (:mod:`hystcli.core.effects`), and the catheter's model with its prediction and
    inverse (:mod:`hystcli.core.model`);
-4. io: runs and models in files, the import of foreign logs (:mod:`hystcli.io`);
-5. use: compensation within a motor's limits, streaming compensation, the evaluation's metrics,
-   reports (tables, formats, figures), checks of a data set;
+4. io: runs and models in files, the import of foreign logs, checks of a data set
+   (:mod:`hystcli.io`);
+5. use: compensation within a motor's limits, streaming compensation (:mod:`hystcli.stream`),
+   reports (:mod:`hystcli.report`: tables, formats, figures, the evaluation's metrics, what
+   ``hyst show`` and ``hyst diff`` print);
 6. estimation: identification, shift detection, diagnosis (search, attribution, drive, refit), and
    the estimator objects around them (:mod:`hystcli.estimators`);
 7. device: the robot protocol, driver, probe, motions, tracking and emulator;
@@ -68,7 +70,7 @@ LAYERS: tuple[tuple[str, ...], ...] = (
     ("signal",),
     ("core",),
     ("io",),
-    ("compensation", "stream", "stream_stages", "stream_kernels", "metrics", "report", "inspection", "check"),
+    ("compensation", "stream", "report"),
     ("identification", "shift", "diagnosis", "estimators"),
     ("device",),
     ("sim", "batch"),
@@ -82,7 +84,7 @@ _LAZY = {
     "Compensator": "stream", "Run": "core.run", "load_model": "io", "read_run": "io", "save_model": "io",
     "write_run": "io", "EffectSpec": "core.params", "Geometry": "core.params", "KnobModel": "core.params",
     "Model": "core.model", "Shape": "core.params", "Settings": "settings", "identify": "identification",
-    "detect_shift": "shift", "compensate": "compensation", "predict": "core.model", "evaluate": "metrics",
+    "detect_shift": "shift", "compensate": "compensation", "predict": "core.model", "evaluate": "report.metrics",
     "diagnose": "diagnosis",
     "Identifier": "estimators", "ShiftDetector": "estimators", "Diagnoser": "estimators",
 }

@@ -1,4 +1,4 @@
-"""hystcli.check: every problem of a run file at once, and the statistics behind the physical ones."""
+"""hystcli.io.check: every problem of a run file at once, and the statistics behind the physical ones."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -6,9 +6,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hystcli import check
+from hystcli.io import check
 from hystcli.io import importer
-from hystcli.check import ERROR, WARNING, Problem, check_file, check_run
+from hystcli.io.check import ERROR, WARNING, Problem, check_file, check_run
 from hystcli.errors import DataError
 from hystcli.core.run import Run
 from hystcli.io import read_run, write_run

@@ -133,7 +133,7 @@ def test_the_identify_plot_file_is_the_figure_s_png(sweep, tmp_path):
 def test_evaluation_plot_is_the_figure_hyst_evaluate_saves(sweep):
     from matplotlib.figure import Figure
 
-    from hystcli.metrics import evaluation_figure
+    from hystcli.report.metrics import evaluation_figure
     from hystcli.report.figures import figure_bytes
 
     model = hystcli.identify(sweep).model.with_offsets({1: 3.0})

@@ -105,7 +105,7 @@ def test_the_diagnosis_figure_is_in_the_style():
 
 
 def test_the_envelope_figure_is_in_the_style(fitted):
-    from hystcli.inspection import envelope_figure
+    from hystcli.report.inspection import envelope_figure
 
     _, ident = fitted
     fig = envelope_figure(ident.model)
@@ -132,7 +132,7 @@ def test_no_figure_module_sets_its_own_colours_or_sizes():
     # every colour, figure size and font size comes from the style: a literal one in a figure
     # function is a figure that looks unlike the others
     files = ["report/evaluation.py", "shift/figure.py", "diagnosis/result.py", "diagnosis/figure.py",
-             "identification/__init__.py", "inspection.py", "batch/report.py", "metrics.py"]
+             "identification/__init__.py", "report/inspection.py", "batch/report.py", "report/metrics.py"]
     literal = re.compile(r"""(color\s*=\s*["'])|(["']tab:)|(\bfigsize\s*=)|(fontsize\s*=\s*\d)|(\blw\s*=\s*\d)"""
                          r"""|(linewidth\s*=\s*\d)|(\bdpi\s*=\s*\d)|(Figure\()|(\.savefig\()""")
     found = []

@@ -15,7 +15,7 @@ import hystcli
 ROOT = Path(__file__).resolve().parents[1]
 FUNCTIONS = {"identify": "hystcli.identification", "detect_shift": "hystcli.shift.search",
              "compensate": "hystcli.compensation", "predict": "hystcli.core.model",
-             "evaluate": "hystcli.metrics", "diagnose": "hystcli.diagnosis"}
+             "evaluate": "hystcli.report.metrics", "diagnose": "hystcli.diagnosis"}
 
 
 def test_the_library_functions_are_top_level_names():
@@ -24,7 +24,7 @@ def test_the_library_functions_are_top_level_names():
         assert callable(fn) and fn is getattr(importlib.import_module(module), name), name
         assert name in hystcli.__all__
     # importing every subpackage does not put a module where a function was (no name is shared)
-    for module in ("hystcli.identification", "hystcli.shift", "hystcli.diagnosis", "hystcli.metrics"):
+    for module in ("hystcli.identification", "hystcli.shift", "hystcli.diagnosis", "hystcli.report.metrics"):
         importlib.import_module(module)
     for name, module in FUNCTIONS.items():
         assert getattr(hystcli, name) is getattr(importlib.import_module(module), name), name
@@ -80,7 +80,7 @@ def _module_examples(name: str) -> doctest.TestResults:
     return doctest.testmod(module, optionflags=doctest.ELLIPSIS, report=False)
 
 
-@pytest.mark.parametrize("name", ["hystcli.stream", "hystcli.io.files", "hystcli.cli.app", "hystcli.shift.request",
+@pytest.mark.parametrize("name", ["hystcli.stream.compensator", "hystcli.io.files", "hystcli.cli.app", "hystcli.shift.request",
                                   "hystcli.estimators"])
 def test_the_docstring_examples_run(name):
     importlib.import_module(name)

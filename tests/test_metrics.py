@@ -1,4 +1,4 @@
-"""Tests of hystcli.metrics: PTPE, RMSE, pooling, improvement rates and the formatters.
+"""Tests of hystcli.report.metrics: PTPE, RMSE, pooling, improvement rates and the formatters.
 
 Every expected number is worked out by hand in the comments (or taken from the paper's Table I),
 never produced by the code under test.
@@ -17,7 +17,7 @@ from hypothesis import strategies as st
 
 from hystcli.errors import DataError
 from hystcli.core.run import Run
-from hystcli.metrics import (Evaluation, evaluate_runs, evaluation_figure, format_json, format_latex, group_table,
+from hystcli.report.metrics import (Evaluation, evaluate_runs, evaluation_figure, format_json, format_latex, group_table,
                              improvement, mean_std, parse_group_by, ptpe, render, rmse, run_table)
 from hystcli.report.table import format_csv, format_markdown, format_text
 

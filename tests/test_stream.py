@@ -1,4 +1,4 @@
-"""The streaming compensator (hystcli/stream.py): one sample at a time it gives the commands
+"""The streaming compensator (hystcli/stream/): one sample at a time it gives the commands
 `hyst compensate` writes for the whole file (the batch inverse, a separate code path), with and
 without every effect form; a block equals the loop; reset, set_offset and rotate do what they say;
 latency is a stated lookahead, never a silent approximation."""

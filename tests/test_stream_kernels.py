@@ -1,5 +1,5 @@
-"""The coupling's compiled per-sample fixed point (hystcli/stream_kernels.py) gives the Python
-passes of hystcli/stream.py bit for bit: every coupled chain it takes, through reset, set_offset
+"""The coupling's compiled per-sample fixed point (hystcli/stream/kernels.py) gives the Python
+passes of hystcli/stream/compensator.py bit for bit: every coupled chain it takes, through reset, set_offset
 and rotate between steps; a chain it has no op for keeps the Python passes."""
 from __future__ import annotations
 

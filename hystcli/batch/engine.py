@@ -80,7 +80,7 @@ def _build(job: Job) -> tuple[Any, str | None]:
         return None, f"{exc.filename or ''}: cannot read ({exc.strerror or exc})"
 
 
-PRELOAD = ("hystcli.batch.tasks", "hystcli.io", "hystcli.metrics")
+PRELOAD = ("hystcli.batch.tasks", "hystcli.io", "hystcli.report.metrics")
 """What the fork server imports once, so that each worker it forks starts with numpy and pandas loaded."""
 
 

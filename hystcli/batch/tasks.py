@@ -223,8 +223,8 @@ def _identify(run: Any, payload: Payload, s: dict, warnings: list[str]) -> dict:
 
 
 def _evaluate(run: Any, payload: Payload, s: dict, warnings: list[str]) -> dict:
-    from ..check import require_shape
-    from ..metrics import evaluate_runs
+    from ..io.check import require_shape
+    from ..report.metrics import evaluate_runs
 
     evaluation = evaluate_runs([require_shape(run)], group_by=())
     warnings.extend(w for w in evaluation.warnings if "metadata (grouped as 'unknown')" not in w)
@@ -263,7 +263,7 @@ def _detect_shift(run: Any, payload: Payload, s: dict, warnings: list[str]) -> d
 def _diagnose(payload: Payload, s: dict, runs: dict[str, Any], out: dict[str, dict]) -> None:
     # one diagnosis per session, its findings on every run of it; a run that cannot be read is
     # left out of the session (its own row says why) rather than failing the others
-    from ..check import require_shape
+    from ..io.check import require_shape
     from ..diagnosis import diagnose
 
     good = [sha for _, sha, _ in payload.runs if sha in runs]
@@ -298,7 +298,7 @@ def _diagnose(payload: Payload, s: dict, runs: dict[str, Any], out: dict[str, di
 
 
 def text_table(columns: Sequence[str], headers: Sequence[str], rows: Sequence[tuple], notes: Sequence[str] = ()) -> Any:
-    """A :class:`hystcli.metrics.Table` (what ``--format`` table/markdown/csv renders), for ``hyst report``."""
+    """A :class:`hystcli.report.table.Table` (what ``--format`` table/markdown/csv renders), for ``hyst report``."""
     from ..report.table import Table
 
     return Table(tuple(columns), tuple(headers), tuple(rows), tuple(notes))

@@ -1,4 +1,4 @@
-"""`hyst check`: every problem of run CSVs at once (:mod:`hystcli.check` finds them; here they are
+"""`hyst check`: every problem of run CSVs at once (:mod:`hystcli.io.check` finds them; here they are
 rendered, one line each, and the exit code says whether any is an error)."""
 from __future__ import annotations
 
@@ -38,7 +38,7 @@ def check_cmd(
     quiet: Annotated[bool, typer.Option("--quiet", "-q", help="Print the errors only (not the warnings, "
                                                               "not the files without a problem).")] = False,
 ) -> None:
-    from ..check import check_file
+    from ..io.check import check_file
 
     distinct_inputs(runs)
     mapping = columns_mapping(columns)

@@ -49,7 +49,7 @@ def diagnose_cmd(
     and PTPE before and after.
     """
     from .. import io
-    from ..check import require_shape
+    from ..io.check import require_shape
     from ..diagnosis import diagnose
     from ..core.effects import EFFECTS
 

@@ -25,7 +25,8 @@ def show_cmd(
     --plot draws each knob's two envelopes against the knob angle (the loop every state lies in).
     csv gives the parameter table; json everything.
     """
-    from .. import inspection, io
+    from .. import io
+    from ..report import inspection
 
     if plot is not None and plot.suffix.lower().lstrip(".") not in ("png", "pdf", "svg"):
         usage_error(f"{plot} must end in .png, .pdf or .svg", "--plot")
@@ -84,7 +85,8 @@ def diff_cmd(
     By default only what differs is listed (e.g. the offset and the shifted edges between a
     straight-shaft model and the one detect-shift wrote).
     """
-    from .. import inspection, io
+    from .. import io
+    from ..report import inspection
 
     table = inspection.diff_table(io.load_model(a), io.load_model(b))
     if not all_rows:

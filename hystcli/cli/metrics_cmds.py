@@ -1,7 +1,7 @@
 """`hyst evaluate`: PTPE and RMSE of runs, pooled over trials, with improvement rates.
 
-Parses the options, reads the runs, calls :func:`hystcli.metrics.evaluate_runs`, and prints (or
-writes) the text :func:`hystcli.metrics.render` returns; ``--plot`` draws the paper's Figs. 6/7.
+Parses the options, reads the runs, calls :func:`hystcli.report.metrics.evaluate_runs`, and prints (or
+writes) the text :func:`hystcli.report.metrics.render` returns; ``--plot`` draws the paper's Figs. 6/7.
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from typing import Annotated, Optional
 
 import typer
 
-from .. import metrics  # numpy only: the grouping fields and plot formats name the options
+from ..report import metrics  # numpy only: the grouping fields and plot formats name the options
 from ..report.figures import PLOT_FORMATS, save_figure
 from .app import (ColumnsOpt, FormatOpt, OutputFormat, PlotOpt, QuietOpt, columns_mapping, command, distinct_inputs,
                   distinct_outputs, info, load_run, option_errors, prints, usage_error, warn)
@@ -51,7 +51,7 @@ def evaluate(
     columns: ColumnsOpt = None,
     quiet: QuietOpt = False,
 ) -> None:
-    from ..check import require_shape
+    from ..io.check import require_shape
     from ..io import all_or_none, check_not_input
 
     if plot is not None:

@@ -256,7 +256,7 @@ def predict_cmd(
 def _prediction_table(predicted):  # noqa: ANN001, ANN202 - core.run.Run -> report.table.Table
     import numpy as np
 
-    from ..metrics import ptpe, rmse
+    from ..report.metrics import ptpe, rmse
     from ..report.table import Table
 
     rows = []

@@ -213,9 +213,9 @@ def track(device: Any, model: Model, reference: Reference, *, limits: Limits = L
         Send sample ``i`` at ``t[i] - t[0]`` after the start (True), or as fast as the robot
         answers.
     latency : {"delay", "ignore"}
-        What the compensator does with a ``latency`` effect (:mod:`hystcli.stream`). With
-        ``delay`` the command of sample ``i`` needs the reference up to ``t[i] + delay``: read
-        ahead from a file at no cost; on stdin the commands go out that much late.
+        What the compensator does with a ``latency`` effect (:mod:`hystcli.stream.compensator`).
+        With ``delay`` the command of sample ``i`` needs the reference up to ``t[i] + delay``:
+        read ahead from a file at no cost; on stdin the commands go out that much late.
     detect_shift_first : bool
         Run Algorithm 1 on each knob first (``hyst detect-shift --port``) and use its offsets.
     shift_options : mapping, optional

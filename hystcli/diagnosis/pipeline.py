@@ -13,7 +13,7 @@ from ..core.effects.base import EffectType
 from ..core.model import Model
 from ..core.run import Run
 from ..errors import DataError, ModelError
-from ..metrics import ptpe as _ptpe
+from ..report.metrics import ptpe as _ptpe
 from . import attribution as A
 from . import drive as D
 from . import refit as R

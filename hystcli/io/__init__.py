@@ -1,4 +1,5 @@
-"""Files in and out: run CSVs, model JSONs, atomic writes, and the import of foreign logs.
+"""Files in and out: run CSVs, model JSONs, atomic writes, the import of foreign logs and the checks
+of a run file.
 
 * :mod:`.runs`: the run CSV format (docs/design.md section 6) of a :class:`~hystcli.core.run.Run`:
   read, parse, validate at the boundary, format;
@@ -7,12 +8,13 @@
 * :mod:`.models`: model JSON files, read and validated, written atomically; a file's hash and
   provenance;
 * :mod:`.importer` (with :mod:`.mapping` and :mod:`.reading`): ``hyst import``, foreign logs
-  turned into runs through a column mapping.
+  turned into runs through a column mapping;
+* :mod:`.check`: ``hyst check``, every problem of a run CSV at once (the format's and the data's).
 
 Every reader raises :class:`~hystcli.errors.DataError` or :class:`~hystcli.errors.ModelError`
 naming the file and the problem. The names below are the package's surface
-(``from hystcli.io import read_run, write_run``); the importer is imported on its own, as
-``hystcli.io.importer``.
+(``from hystcli.io import read_run, write_run``); the importer and the checks are imported on
+their own, as ``hystcli.io.importer`` and ``hystcli.io.check``.
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 and 7 (``hyst evaluate --plot``, the demo's figures, ``Evaluation.plot``).
 
 The drawing only: which run stands for which panel is the evaluation's choice
-(:func:`hystcli.metrics.figure_columns`), so this module does not import the metrics and the
+(:func:`hystcli.report.metrics.figure_columns`), so this module does not import the metrics and the
 metrics' result can draw itself."""
 from __future__ import annotations
 
@@ -33,8 +33,8 @@ Columns = Sequence[tuple[tuple[str, str, int], Sequence[tuple[str, str, Run]]]]
 
 def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figure
     """Time-vs-output and input-vs-output panels like the paper's Figs. 6 and 7, as a matplotlib
-    ``Figure`` (:meth:`hystcli.metrics.Evaluation.plot`; the file is
-    :func:`hystcli.metrics.evaluation_figure`'s).
+    ``Figure`` (:meth:`hystcli.report.metrics.Evaluation.plot`; the file is
+    :func:`hystcli.report.metrics.evaluation_figure`'s).
 
     One column per (motion, shape, knob); in it, for each controller, one run; top: ``r`` (ground
     truth, the style's reference) and each controller's ``y`` against time; bottom: ``y`` against
@@ -45,7 +45,7 @@ def evaluation_axes(columns: Columns):  # noqa: ANN201 - matplotlib.figure.Figur
     ----------
     columns : sequence of ((motion, shape, knob), sequence of (controller, label, run))
         The panels' columns in order, each with its controllers in order (which run stands for
-        which cell is the evaluation's choice, :func:`hystcli.metrics.figure_columns`).
+        which cell is the evaluation's choice, :func:`hystcli.report.metrics.figure_columns`).
 
     Returns
     -------

@@ -2,7 +2,7 @@
 
 Every command that prints a table builds a :class:`Table` and renders it with
 :func:`format_table` in the ``--format`` asked for; the evaluation's own layouts (the paper's
-Tables I and II) are :mod:`hystcli.metrics`'. Nothing here prints or imports typer or rich.
+Tables I and II) are :mod:`hystcli.report.metrics`'. Nothing here prints or imports typer or rich.
 """
 from __future__ import annotations
 

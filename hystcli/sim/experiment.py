@@ -11,7 +11,7 @@ This module owns the protocol runner behind ``hyst demo`` and the recordings it 
    shift (Compensation-Only), ``comp+shift`` uses the detected offsets;
 4. run each controller (``none``: q = r; ``comp``; ``comp+shift``) on the twin
    (:func:`hystcli.sim.twin.simulate_motion`), several trials with different sensor noise;
-5. evaluate every run (:func:`hystcli.metrics.evaluate_runs`) into the cells of Table I (1-DoF,
+5. evaluate every run (:func:`hystcli.report.metrics.evaluate_runs`) into the cells of Table I (1-DoF,
    periodic, shapes straight / alpha = 45 / alpha = 90) and Table II (2-DoF, non-periodic, shape
    alpha_1 = 45, theta_1 = 0; alpha_2 = 45, theta_2 = 90), beside the paper's values;
 6. beyond the paper: diagnose the Compensation+Shift runs of each catheter
@@ -52,7 +52,7 @@ from typing import Callable, Mapping, Sequence
 import numpy as np
 from threadpoolctl import threadpool_limits
 
-from .. import metrics
+from ..report import metrics
 from ..compensation import compensate
 from ..core.model import Model
 from ..core.params import PAPER_OMEGA

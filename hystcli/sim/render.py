@@ -6,10 +6,10 @@ import textwrap
 from pathlib import Path
 from typing import Mapping, Sequence
 
-from .. import metrics
+from ..report import metrics
 from ..errors import DataError
 from ..io import all_or_none
-from ..metrics import evaluation_figure
+from ..report.metrics import evaluation_figure
 from ..report.table import TEXT_WIDTH, Table, format_markdown, format_text
 from .experiment import Cell, ExperimentResult
 from .scenarios import CONTROLLERS, PAPER_CELLS, PAPER_IMPROVEMENT, SCENARIOS, TOLERANCE

@@ -318,7 +318,7 @@ class EffectType:
         stated condition and number of knobs: when not, diagnosis reuses the base prediction."""
         return True
 
-    # -- one sample at a time (the streaming compensator, hystcli/stream.py) --------------------
+    # -- one sample at a time (the streaming compensator, hystcli/stream/) ----------------------
     def stepper(self, eff: "Effect", k: int, options: Mapping[str, float], warnings: list[str]) -> Any:
         """A one-sample inverse of this signal stage, or None when it has none.
 

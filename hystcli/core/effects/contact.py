@@ -45,7 +45,7 @@ class Contact(EffectType):
         """Extra motor current (mA) while the wall blocks the tip: stiffness per deg of knob past it."""
         return eff["stiffness"] * np.abs(free - tip) / omega
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     def stepper(self, eff, k, options, warnings):
         """The target clipped at the wall, one sample at a time (warns once, as :meth:`inverse`)."""
         from .kernels import StatelessStep

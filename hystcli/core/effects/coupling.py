@@ -112,7 +112,7 @@ class Coupling(EffectType):
     def acts_on(self, form, curvature, condition, two_knobs):
         return two_knobs
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     @staticmethod
     def drive_at(eff, other: float) -> float:
         """The other knob's drive D (deg) for one sample of what the coupling sees of it: its

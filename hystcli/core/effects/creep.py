@@ -54,7 +54,7 @@ class Creep(EffectType):
                                      np.full(3, np.nan) if state is None else state, out)
         return out
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     def stepper(self, eff, k, options, warnings):
         """The exact inverse, one sample at a time (:meth:`inverse`'s numbers)."""
         return kernels.UnlagStep(float(eff["fraction"]), float(eff["tau"]), math.inf)

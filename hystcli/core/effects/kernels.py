@@ -284,7 +284,7 @@ def sumsq_kernel(r):
 
 
 # --------------------------------------------------------------------------------------------
-# one sample at a time, in plain Python floats (the streaming compensator, hystcli/stream.py)
+# one sample at a time, in plain Python floats (the streaming compensator, hystcli/stream/)
 # --------------------------------------------------------------------------------------------
 # A numba call costs about as much as the whole one-sample arithmetic (its dispatcher boxes the
 # arguments), so a streaming step runs these plain-float mirrors of the kernels above instead.

@@ -74,7 +74,7 @@ class Latency(EffectType):
             return z
         return np.interp(t + eff["delay"], t, z)
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     def preview(self, eff):
         """The inverse reads the target ``delay`` seconds ahead: not causal (a streaming
         compensator buffers the reference that long, or leaves the delay in)."""

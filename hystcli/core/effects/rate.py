@@ -127,7 +127,7 @@ class Rate(EffectType):
     def new_inverse_state(self, eff):
         return [np.full(3, np.nan) for _ in range(self.order(eff))]
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     def stepper(self, eff, k, options, warnings):
         """The exact inverse lag(s), one sample at a time (:meth:`inverse`'s numbers)."""
         lead = float(options["max_lead"])

@@ -182,7 +182,7 @@ class Saturation(EffectType):
             return np.where(zc >= 0.0, lim * np.arctanh(zc / lim), neg * np.arctanh(zc / neg))
         return lim * np.arctanh(np.clip(z, -reach, reach) / lim)
 
-    # -- one sample at a time (hystcli/stream.py) ------------------------------------------------
+    # -- one sample at a time (hystcli/stream/) --------------------------------------------------
     def stepper(self, eff, k, options, warnings):
         """The inverse static map, one sample at a time (warns once, as :meth:`inverse`)."""
         from .kernels import StatelessStep

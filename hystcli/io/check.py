@@ -40,11 +40,10 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
-from .core.run import Run
-from .errors import DataError, HystError
-from .io import KNOWN_COLUMNS, MAX_ABS_VALUE
-from .io.runs import _parse_meta_line as _meta_line
-from .settings import CURRENT_SIGNS
+from ..core.run import Run
+from ..errors import DataError, HystError
+from ..settings import CURRENT_SIGNS
+from .runs import KNOWN_COLUMNS, MAX_ABS_VALUE, _parse_meta_line as _meta_line
 
 ERROR = "error"
 WARNING = "warning"
@@ -159,7 +158,7 @@ def noise(x: np.ndarray) -> float:
     whose variance is 6 sigma^2 for white noise: a smooth motion adds little to second
     differences, outliers nothing.
     """
-    from .signal.pwl import robust_scale
+    from ..signal.pwl import robust_scale
 
     return robust_scale(np.diff(np.asarray(x, dtype=float), 2)) / math.sqrt(6.0)
 
@@ -181,8 +180,8 @@ def passes_an_edge(q: np.ndarray, c: np.ndarray) -> tuple[bool, int]:
     Each stretch is read as identify reads it: against the knob angle along the motion, a
     continuous broken line of one or two pieces, chosen by BIC.
     """
-    from .signal.pwl import fit_piecewise
-    from .signal.stretches import monotone_stretches
+    from ..signal.pwl import fit_piecewise
+    from ..signal.stretches import monotone_stretches
 
     tested = 0
     for a, b, direction in monotone_stretches(q):
@@ -201,7 +200,7 @@ def passes_an_edge(q: np.ndarray, c: np.ndarray) -> tuple[bool, int]:
 # --------------------------------------------------------------------------------------------
 def _time_problems(t: np.ndarray, linenos: np.ndarray) -> tuple[list[Problem], float | None, float | None]:
     """Non-increasing steps, jitter and gaps of a time column (finite values only)."""
-    from .io.importer import IRREGULAR
+    from .importer import IRREGULAR
 
     out: list[Problem] = []
     ok = np.isfinite(t)
@@ -231,8 +230,8 @@ def _time_problems(t: np.ndarray, linenos: np.ndarray) -> tuple[list[Problem], f
 
 def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) -> list[Problem]:
     """The physical checks of knob ``k`` (its angle moves)."""
-    from .signal.reading import detect_sign
-    from .signal.stretches import find_reversals
+    from ..signal.reading import detect_sign
+    from ..signal.stretches import find_reversals
 
     out: list[Problem] = []
     q_name, y_name, c_name = f"q{k}", f"y{k}", f"c{k}"
@@ -280,7 +279,7 @@ def _knob_problems(cols: Mapping[str, np.ndarray], k: int, current_sign: str) ->
 
 
 def _meta_problems(meta: Mapping[str, str]) -> list[Problem]:
-    from .core.params import Shape
+    from ..core.params import Shape
 
     shape = meta.get("shape")
     if shape is None or not str(shape).strip():
@@ -436,7 +435,7 @@ def check_file(path: str | os.PathLike, columns: object = None, current_sign: st
     CheckReport
         Never raises for a bad file: everything wrong is a :class:`Problem`.
     """
-    from .io import importer
+    from . import importer
 
     source = str(path)
     text, problems = _read_text(Path(path))
@@ -512,7 +511,7 @@ def _ordered(problems: list[Problem]) -> list[Problem]:
 
 
 def _missing_columns(targets: Sequence[str], names: Sequence[str], mapped: bool) -> list[Problem]:
-    from .io.importer import suggest_columns
+    from .importer import suggest_columns
 
     out = []
     if "t" not in targets:

@@ -33,10 +33,10 @@ from typing import Iterable, Sequence
 
 import numpy as np
 
-from .core.params import Shape
-from .core.run import Run
-from .errors import DataError, HystError
-from .report.table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
+from ..core.params import Shape
+from ..core.run import Run
+from ..errors import DataError, HystError
+from .table import (FORMATS, Cell, Table, format_csv, format_latex_long, format_markdown,
                            format_text, latex_escape)
 
 UNKNOWN = "unknown"
@@ -287,7 +287,7 @@ class Evaluation:
         matplotlib.figure.Figure
             What ``hyst evaluate --plot`` saves (:func:`evaluation_figure`).
         """
-        from .report.evaluation import evaluation_axes
+        from .evaluation import evaluation_axes
 
         return evaluation_axes(figure_columns(runs))
 
@@ -513,8 +513,8 @@ def evaluation_figure(runs: Sequence[Run], fmt: str = "png") -> bytes:
     DataError
         Another format; no run with a tip column and its reference.
     """
-    from .report.evaluation import evaluation_axes
-    from .report.figures import PLOT_FORMATS, figure_bytes
+    from .evaluation import evaluation_axes
+    from .figures import PLOT_FORMATS, figure_bytes
 
     if fmt not in PLOT_FORMATS:
         raise DataError(f"cannot draw a {fmt!r} figure: choose among {', '.join(PLOT_FORMATS)}")

@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from typing import Any, Sequence
 
-from .core.model import Model
-from .core.params import KnobIdentification, KnobModel, PARAM_NAMES
-from .report.table import Table
+from ..core.model import Model
+from ..core.params import KnobIdentification, KnobModel, PARAM_NAMES
+from .table import Table
 
 DERIVED = ("dhat_pos", "dhat_neg", "shifted_d_pos", "shifted_d_neg")
 """Edges a knob's parameters imply (deg): the far edges of the dead zone, the shifted edges."""
@@ -157,7 +157,7 @@ def envelope_figure(model: Model, q_range: Sequence[float] | None = None):  # no
     """
     import numpy as np
 
-    from .report import style
+    from . import style
 
     ks = list(model.knobs)
     fig, axes = style.new_figure(1, len(ks))

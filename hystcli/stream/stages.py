@@ -1,16 +1,16 @@
 """The stages of the streaming compensator, one sample at a time: the hysteresis inverse, a knob's
 bend as the other knob's coupling reads it, one knob's chain, and the coupled chains' compiled
-fixed point (:mod:`hystcli.stream_kernels`). :class:`hystcli.stream.Compensator` drives them."""
+fixed point (:mod:`hystcli.stream.kernels`). :class:`hystcli.stream.Compensator` drives them."""
 from __future__ import annotations
 
 from typing import Any, Sequence
 
 import numpy as np
 
-from .core.effects import chain, kernels
-from .core.effects.base import Effect, Signals
-from .core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
-from .core.params import KnobModel
+from ..core.effects import chain, kernels
+from ..core.effects.base import Effect, Signals
+from ..core.kernel import clamp_py as _clamp, envelopes_py as _envelopes, inverse_step_py as _inverse_step
+from ..core.params import KnobModel
 
 
 class _Hysteresis:
@@ -181,7 +181,7 @@ class _Knob:
 
 class _CompiledCoupling:
     """The coupled tails of two knobs and what each knob's coupling sees of the other's command,
-    as the op table of :mod:`hystcli.stream_kernels`: the per-sample fixed point in one compiled
+    as the op table of :mod:`hystcli.stream.kernels`: the per-sample fixed point in one compiled
     call. The table owns the state of those stages (the Python stage objects of the tails and of
     ``seen`` then sit idle); the head stays in Python. Built only when every stage has an op."""
 
@@ -209,9 +209,9 @@ class _CompiledCoupling:
 
     @staticmethod
     def _flatten(s: Any, table: list) -> bool:
-        from . import stream_kernels as K
-        from .core.effects import kernels
-        from .core.effects.coupling import _CouplingStep
+        from . import kernels as K
+        from ..core.effects import kernels
+        from ..core.effects.coupling import _CouplingStep
 
         if isinstance(s, kernels.Cascade):
             return all(_CompiledCoupling._flatten(x, table) for x in s.steps)
@@ -230,7 +230,7 @@ class _CompiledCoupling:
         return True
 
     def __init__(self, table: list, rng: list) -> None:
-        from . import stream_kernels as K
+        from . import kernels as K
 
         self.kernel = K.coupled_step
         n_par = n_st = 0
@@ -253,7 +253,7 @@ class _CompiledCoupling:
 
     def load_params(self) -> None:
         """The stages' parameters now (a new offset moves the hysteresis and a coupling's zero)."""
-        from . import stream_kernels as K
+        from . import kernels as K
 
         par = self.par
         for code, s, p in self._params:

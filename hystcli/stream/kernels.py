@@ -19,19 +19,19 @@ COUPLE     ``z + g D`` (input forms) / ``z - g D`` (output        gain, sign, ma
            forms); the identity when the other knob is not given
 UNLAG      :class:`hystcli.core.effects.kernels.UnlagStep`             fraction, tau, lead / fresh,
                                                                   u, z, tp, dt, e, c
-HYST       ``_Hysteresis.step`` of hystcli/stream_stages.py       the knob's 8 kernel args, n,
+HYST       ``_Hysteresis.step`` of hystcli/stream/stages.py       the knob's 8 kernel args, n,
            (edges moved by the deadzone couplings)                (gain, magnitude) x n / y, x
 LAG        :class:`hystcli.core.effects.kernels.LagStep` (what the     tau / fresh, z, tp, up, dt, e
            other knob's coupling sees of a command)
-BEND       ``_Bend.step`` of hystcli/stream_stages.py: the        the knob's 8 kernel args / y
+BEND       ``_Bend.step`` of hystcli/stream/stages.py: the        the knob's 8 kernel args / y
            knob's base model forward, its bend as the other
            knob's magnitude coupling sees it
 =========  ===================================================  ===============================
 
 Every op does the same IEEE operations in the same order as its Python stage, so a step gives
 the Python path's numbers (``exp`` may differ by an ulp). Importing this module compiles nothing:
-the kernel compiles (or loads from numba's cache) on its first call; ``hystcli.stream`` imports
-it only when a compensator has a coupled chain, so ``import hystcli`` stays light.
+the kernel compiles (or loads from numba's cache) on its first call; ``hystcli.stream.stages``
+imports it only when a compensator has a coupled chain, so ``import hystcli`` stays light.
 """
 from __future__ import annotations
 
@@ -40,7 +40,7 @@ import math
 import numpy as np
 from numba import njit
 
-from .core import kernel
+from ..core import kernel
 
 COUPLE, UNLAG, HYST, LAG, BEND = 0, 1, 2, 3, 4
 """Op codes of the table (module notes)."""

@@ -17,7 +17,7 @@ What is causal, and what is not:
 * ``coupling`` reads the other knob's command of the same sample: solved per sample by the same
   fixed-point iteration the batch inverse runs over the whole run (so a two-knob step costs up to
   ``iterations`` passes over the coupled stages: one compiled call of
-  :mod:`hystcli.stream_kernels` where every coupled stage has an op there, else Python passes);
+  :mod:`hystcli.stream.kernels` where every coupled stage has an op there, else Python passes);
 * ``latency`` (the tracker reports the tip ``delay`` s late) has no causal exact inverse: to make
   the *reported* tip follow ``r`` the command at ``t`` must aim at ``r(t + delay)``. The default
   (``latency="delay"``) buffers ``lookahead = ceil(delay / dt)`` samples: :meth:`Compensator.step`
@@ -44,7 +44,7 @@ Cost: a step is plain Python floats (no numpy, no numba dispatch, no allocation 
 float or pair), but for a coupling's fixed point, which is one numba call over preallocated arrays
 (the kernel compiles, or loads from numba's cache, on the first coupled step, never at import);
 :meth:`Compensator.steps` runs a knob without effects through the compiled kernel of
-:mod:`hystcli.core.kernel`. The stages themselves are :mod:`hystcli.stream_stages`'.
+:mod:`hystcli.core.kernel`. The stages themselves are :mod:`hystcli.stream.stages`'.
 ``bench/bench_stream.py`` measures both (docs/streaming.md).
 """
 from __future__ import annotations
@@ -54,14 +54,14 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .core import kernel as core_kernel
-from .core.effects import chain
-from .core.effects.registry import as_effects
-from .core.model import Model
-from .core.params import Shape
-from .errors import DataError, ModelError
-from .safety import CatchUp, Limits, RateLimiter
-from .stream_stages import _Bend, _CompiledCoupling, _Hysteresis, _Knob
+from ..core import kernel as core_kernel
+from ..core.effects import chain
+from ..core.effects.registry import as_effects
+from ..core.model import Model
+from ..core.params import Shape
+from ..errors import DataError, ModelError
+from ..safety import CatchUp, Limits, RateLimiter
+from .stages import _Bend, _CompiledCoupling, _Hysteresis, _Knob
 
 LATENCY_MODES = ("delay", "ignore")
 """What a :class:`Compensator` does with a ``latency`` effect (see the module's notes)."""
@@ -198,7 +198,7 @@ class Compensator:
             self._chains[k] = _Knob(k, made[:cut], made[cut:], hyst, seen)
         self._coupled = two and cut < len(kept)
         # the coupled tails' per-sample fixed point as one compiled call, where every stage has an
-        # op (hystcli/stream_kernels.py); else the Python passes of _command
+        # op (hystcli/stream/kernels.py); else the Python passes of _command
         self._fast = _CompiledCoupling.build(self._chains[self._knobs[0]], self._chains[self._knobs[1]],
                                              self._plan) if self._coupled else None
         # the time-driven stages (lags, creep, the tracker delay) need each sample's time
