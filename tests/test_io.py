@@ -36,6 +36,16 @@ def test_read_run_keeps_metadata_and_columns(tmp_path):
     assert run.knobs() == [1]
 
 
+@pytest.mark.parametrize("prefix, newline", [("", "\n"), ("\ufeff", "\r\n"), ("\ufeff", "\n"), ("\n", "\r\n")])
+def test_read_meta_reads_the_head_as_read_run_does(tmp_path, prefix, newline):
+    # an Excel byte-order mark, CRLF or a leading blank line must not hide the first metadata line
+    from hystcli.io.runs import read_meta
+
+    p = tmp_path / "run.csv"
+    p.write_bytes((prefix + GOOD.replace("\n", newline)).encode("utf-8"))
+    assert read_meta(p) == read_run(p).meta == {"catheter": "ice-a", "shape": "alpha=90,theta=0", "lab_note": "kept"}
+
+
 @pytest.mark.parametrize("text, message", [
     ("", "empty file"),
     ("# catheter: x\n", "empty file"),

@@ -39,28 +39,38 @@ def _parse_meta_line(line: str) -> tuple[str, str] | None:
     return key, value.strip()
 
 
+def _meta_of(lines: Iterable[str]) -> dict[str, str]:
+    """The ``# key: value`` metadata among a run's head lines (other comments are skipped)."""
+    meta: dict[str, str] = {}
+    for line in lines:
+        if line.startswith("#"):
+            kv = _parse_meta_line(line)
+            if kv is not None:
+                meta[kv[0]] = kv[1]
+    return meta
+
+
 def read_meta(path: str | os.PathLike) -> dict[str, str]:
-    """The ``# key: value`` metadata of a run CSV, read from its leading comment lines only (the
-    rows are not read): what a batch groups runs by before any worker parses them.
+    """The ``# key: value`` metadata of a run CSV, read from its head only (the rows are not
+    read), as :func:`read_run` reads it: what a batch groups runs by before any worker parses them.
 
     Raises
     ------
     DataError
         The file cannot be read.
     """
-    meta: dict[str, str] = {}
+    head: list[str] = []
     try:
-        with open(path, encoding="utf-8", errors="replace") as f:
+        # utf-8-sig, as read_run: a byte-order mark is not part of the first metadata line
+        with open(path, encoding="utf-8-sig", errors="replace") as f:
             for line in f:
-                if line.startswith("#"):
-                    kv = _parse_meta_line(line.rstrip("\n"))
-                    if kv is not None:
-                        meta[kv[0]] = kv[1]
-                elif line.strip():
+                line = line.rstrip("\r\n")
+                if line.strip() and not line.startswith("#"):
                     break  # the header: metadata only comes before it
+                head.append(line)
     except OSError as exc:
         raise DataError(f"{path}: cannot read ({exc.strerror or exc})") from None
-    return meta
+    return _meta_of(head)
 
 
 READ_PROGRESS_BYTES = 16 * 2**20
@@ -183,12 +193,7 @@ def parse_run(text: str, source: str = "<run>", require: Iterable[str] = ("t",))
 def _parse_head(lines: list[str], source: str, require: Iterable[str]) -> tuple[dict[str, str], list[str]]:
     """The metadata and the header of a run CSV from its first lines (metadata and blank lines,
     then the header, the last), the header checked and the ``require``d columns in it."""
-    meta: dict[str, str] = {}
-    for line in lines[:-1]:
-        if line.startswith("#"):
-            kv = _parse_meta_line(line)
-            if kv is not None:
-                meta[kv[0]] = kv[1]
+    meta = _meta_of(lines[:-1])
     if not lines or lines[-1].startswith("#") or not lines[-1].strip():
         raise DataError(f"{source}: empty file (no header row)")
     i = len(lines) - 1
