@@ -287,6 +287,7 @@ def test_diagnose_sessions_by_a_metadata_key_across_folders(tmp_path):
     table = {Path(r["path"]).stem: r for r in pq.read_table(out).to_pylist()}
     assert len(table) == 7
     assert table["nokey"]["status"] == "refused" and "'# robot: ...'" in table["nokey"]["reason"]
+    assert table["nokey"]["session"] is None
     assert table["nokey"]["sha256"] == hashlib.sha256((d / "nokey.csv").read_bytes()).hexdigest()
     for robot, top in (("a", "latency"), ("b", "none")):
         group = [table[f"{robot}{i}"] for i in range(3)]

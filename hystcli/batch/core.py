@@ -232,8 +232,8 @@ def plan(command: str, inputs: Sequence[str] = (), manifest: Path | None = None,
             value = read_meta(path).get(session_by, "").strip()
             if value:
                 session = f"{session_by}={value}"
-            else:
-                reason = f"{path}: no '# {session_by}: ...' metadata line to put it in a session by"
+            else:  # in no session: not its folder's either, which --session-by set aside
+                session, reason = None, f"{path}: no '# {session_by}: ...' metadata line to put it in a session by"
         entries.append(Entry(path, sha, m, hash_model(m) if m else None, session if command == "diagnose" else None,
                              extra, reason))
     entries.sort(key=lambda e: e.path)
